@@ -1,0 +1,1 @@
+"""WGSL sources of bokehfit, shipped as package data (loaded by bokehfit.gpu.shaders)."""

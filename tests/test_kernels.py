@@ -1,0 +1,206 @@
+"""Kernels: exact against brute force, mc and raster against exact, and hard cases."""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+import shapely
+
+from bokehfit.apertures import SHAPES, make_aperture
+from bokehfit.kernels import METHODS, KernelClippedWarning, compute_kernel, render_kernel
+
+#: Every shape; the slit at aspect 0.6 so that it fits the small frames used here.
+SHAPE_PARAMS = [(s, {"ngon": {"blades": 9}, "slit": {"aspect": 0.6}}.get(s, {})) for s in SHAPES]
+#: Brute-force raster: SUPERSAMPLE² points per pixel; a pixel's coverage is then
+#: exact to within the share of points an edge can flip, ≤ about 2/SUPERSAMPLE.
+SUPERSAMPLE = 32
+
+
+def brute_force_kernel(shape, angle, diameter, size, **params):
+    """Independent reference: count supersample points inside the shape (shapely)."""
+    aperture = make_aperture(shape, angle, **params)
+    scale = diameter * math.sqrt(math.pi) / 2
+    centre = (size - 1) / 2
+    offsets = (np.arange(SUPERSAMPLE) + 0.5) / SUPERSAMPLE - 0.5
+    cols = (np.arange(size)[:, None] + offsets[None, :]).ravel() - centre
+    rows = (np.arange(size)[:, None] + offsets[None, :]).ravel()
+    x, y = np.meshgrid(cols, centre - rows)
+    vertices = aperture.vertices()
+    if vertices is None:
+        inside = x * x + y * y <= (scale / math.sqrt(math.pi)) ** 2
+    else:
+        inside = shapely.contains_xy(shapely.Polygon(vertices * scale), x, y)
+    counts = inside.reshape(size, SUPERSAMPLE, size, SUPERSAMPLE).sum(axis=(1, 3))
+    return counts / counts.sum()
+
+
+@pytest.mark.parametrize("shape,params", SHAPE_PARAMS)
+def test_exact_sums_to_one_and_matches_brute_force(shape, params):
+    kernel = render_kernel(shape, 17.0, 21.0, 40, **params)
+    assert kernel.dtype == np.float32 and kernel.shape == (40, 40)
+    assert kernel.sum() == pytest.approx(1.0, abs=1e-6)
+    reference = brute_force_kernel(shape, 17.0, 21.0, 40, **params)
+    pixel_area = 1.0 / (math.pi * 21.0**2 / 4)  # one fully covered pixel, normalised
+    assert np.abs(kernel - reference).max() <= 2.0 / SUPERSAMPLE * pixel_area
+
+
+@pytest.mark.parametrize("shape,params", SHAPE_PARAMS)
+def test_near_is_far_rotated_180(shape, params):
+    far = render_kernel(shape, 33.0, 19.0, 31, **params)
+    near = render_kernel(shape, 33.0, 19.0, 31, side="near", **params)
+    np.testing.assert_allclose(near, np.rot90(far, 2), atol=1e-7)
+    if shape in ("triangle", "pentagon", "star"):  # odd symmetry: near differs from far
+        assert np.abs(near - far).sum() > 0.1
+
+
+def test_light_projects_to_frame_centre():
+    """The kernel's centroid is the light's projection ((size-1)/2, (size-1)/2)."""
+    for size in (31, 32):
+        kernel = render_kernel("square", 0.0, 9.0, size)
+        rows, cols = np.indices(kernel.shape)
+        assert (kernel * cols).sum() == pytest.approx((size - 1) / 2, abs=1e-5)
+        assert (kernel * rows).sum() == pytest.approx((size - 1) / 2, abs=1e-5)
+
+
+def test_triangle_at_90_points_up_on_screen():
+    """y is up on screen: at 90° a vertex points to row 0 (the top), not the bottom."""
+    kernel = render_kernel("triangle", 90.0, 40.0, 64)
+    top, bottom = kernel[:24].sum(), kernel[40:].sum()
+    assert top < bottom  # the vertex (narrow part) is at the top; the wide base below
+
+
+def l1(kernel, reference):
+    return float(np.abs(kernel.astype(np.float64) - reference).sum())
+
+
+@pytest.mark.parametrize(
+    "method,sampling,min_rate",
+    [
+        # Claimed rates: stratified N^-3/4, independent N^-1/2; asserted with margin
+        # over two decades of samples (a ratio of 100^rate in L1).
+        ("mc", "stratified", 0.65),
+        ("mc", "independent", 0.42),
+        ("raster", "stratified", 0.65),
+    ],
+)
+def test_sampling_methods_converge_to_exact(gpu, method, sampling, min_rate):
+    exact = render_kernel("hexagon", 20.0, 64.0, 128).astype(np.float64)
+    errors = [
+        l1(render_kernel("hexagon", 20.0, 64.0, 128, method=method, sampling=sampling, samples=n, seed=3), exact)
+        for n in (10**5, 10**7)
+    ]
+    rate = math.log(errors[0] / errors[1]) / math.log(100.0)
+    assert rate >= min_rate, f"{method}/{sampling}: L1 {errors} gives rate {rate:.2f} < {min_rate}"
+    assert errors[1] < 0.02
+
+
+@pytest.mark.parametrize("method", ["mc", "raster"])
+@pytest.mark.parametrize("shape,params", SHAPE_PARAMS)
+def test_sampling_methods_match_exact_for_every_shape(gpu, method, shape, params):
+    for side in ("far", "near"):
+        exact = render_kernel(shape, 41.0, 24.0, 40, side=side, **params).astype(np.float64)
+        sampled = render_kernel(shape, 41.0, 24.0, 40, side=side, method=method, samples=4 * 10**6, **params)
+        assert sampled.sum() == pytest.approx(1.0, abs=1e-5)
+        assert l1(sampled, exact) < 0.01, f"{method} {shape} {side}"
+
+
+def test_mc_same_seed_same_kernel(gpu):
+    a = render_kernel("star", 5.0, 30.0, 48, method="mc", samples=10**5, seed=11)
+    b = render_kernel("star", 5.0, 30.0, 48, method="mc", samples=10**5, seed=11)
+    c = render_kernel("star", 5.0, 30.0, 48, method="mc", samples=10**5, seed=12)
+    np.testing.assert_array_equal(a, b)
+    assert np.abs(a - c).sum() > 0
+
+
+def test_samples_reported_are_samples_drawn(gpu):
+    kernel = compute_kernel("circle", 0.0, 20.0, 32, method="mc", samples=1000)
+    assert kernel.samples == 32 * 32  # stratified: rounded up to a square, m = 32
+    assert "Vulkan" in kernel.device or "OpenGL" in kernel.device or kernel.device
+
+
+@pytest.mark.parametrize("method", list(METHODS))
+def test_tiny_disc_half_pixel(request, method):
+    if method != "exact":
+        request.getfixturevalue("gpu")
+    kernel = render_kernel("hexagon", 0.0, 0.5, 8, method=method, samples=10**5)
+    assert kernel.sum() == pytest.approx(1.0, abs=1e-6)
+    # Even size: the light sits on the corner of the four central pixels.
+    assert kernel[3:5, 3:5].sum() == pytest.approx(1.0, abs=1e-6)
+    np.testing.assert_allclose(kernel[3:5, 3:5], 0.25, atol=0.01 if method != "exact" else 1e-6)
+
+
+def test_huge_disc_1000px():
+    kernel = compute_kernel("pentagon", 10.0, 1000.0, 1200)  # circumradius 575 px
+    assert kernel.clipped_fraction == 0.0
+    assert kernel.image.sum() == pytest.approx(1.0, abs=1e-5)
+    assert np.all(np.isfinite(kernel.image)) and kernel.image.min() >= 0.0
+    interior = kernel.image[600, 600]
+    assert interior == pytest.approx(1.0 / (math.pi * 1000.0**2 / 4), rel=1e-6)
+
+
+def test_huge_disc_1000px_mc(gpu):
+    exact = render_kernel("circle", 0.0, 1000.0, 1024).astype(np.float64)
+    sampled = render_kernel("circle", 0.0, 1000.0, 1024, method="mc", samples=2 * 10**7)
+    # 25 samples a pixel; independent samples would give L1 ≈ √(pixels / N) ≈ 0.2.
+    assert l1(sampled, exact) < 0.08
+
+
+@pytest.mark.parametrize("method", list(METHODS))
+def test_frame_smaller_than_disc_is_clipped_and_says_so(request, method):
+    if method != "exact":
+        request.getfixturevalue("gpu")
+    with pytest.warns(KernelClippedWarning, match=r"kernel clipped: .*% of the light"):
+        kernel = compute_kernel("square", 0.0, 40.0, 16, method=method, samples=10**5)
+    assert kernel.image.sum() == pytest.approx(1.0, abs=1e-6)
+    lost = 1 - 16 * 16 / (math.pi * 40.0**2 / 4)
+    assert kernel.clipped_fraction == pytest.approx(lost, rel=1e-9)
+
+
+def test_unclipped_kernel_gives_no_warning():
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        render_kernel("hexagon", 0.0, 30.0, 34)  # circumradius 16.5 px < 17
+
+
+@pytest.mark.parametrize("angle_pair", [(0.0, 60.0), (-30.0, 30.0), (390.0, 30.0), (60.0 - 1e-6, -1e-6)])
+def test_angles_equivalent_modulo_symmetry(angle_pair):
+    a, b = (render_kernel("hexagon", angle, 30.0, 40) for angle in angle_pair)
+    np.testing.assert_allclose(a, b, atol=1e-7)
+
+
+@pytest.mark.parametrize("aspect", [0.01, 100.0])
+def test_extreme_slit_aspects(aspect):
+    with pytest.warns(KernelClippedWarning):
+        kernel = render_kernel("slit", 0.0, 20.0, 64, aspect=aspect)
+    assert np.all(np.isfinite(kernel)) and kernel.sum() == pytest.approx(1.0, abs=1e-6)
+    # A thin slit: all light in one column (aspect 0.01) or one row (aspect 100).
+    axis = 0 if aspect < 1 else 1
+    profile = kernel.sum(axis=axis)
+    assert profile.max() > 0.45  # centred between two pixels of an even frame: two halves
+
+
+@pytest.mark.parametrize(
+    "kwargs,parameter",
+    [
+        (dict(shape="hexgon"), "shape"),
+        (dict(size=0), "size"),
+        (dict(size=2.5), "size"),
+        (dict(diameter_px=float("nan")), "diameter_px"),
+        (dict(diameter_px=-3.0), "diameter_px"),
+        (dict(diameter_px=float("inf")), "diameter_px"),
+        (dict(angle_deg=float("nan")), "angle_deg"),
+        (dict(side="behind"), "side"),
+        (dict(method="magic"), "method"),
+        (dict(samples=0), "samples"),
+        (dict(shape="ngon"), "blades"),
+        (dict(shape="slit", aspect=0.0), "aspect"),
+    ],
+)
+def test_bad_parameters_raise_value_error_naming_them(kwargs, parameter):
+    args = dict(shape="hexagon", angle_deg=0.0, diameter_px=20.0, size=32)
+    args.update(kwargs)
+    with pytest.raises(ValueError, match=parameter):
+        render_kernel(args.pop("shape"), args.pop("angle_deg"), args.pop("diameter_px"), args.pop("size"), **args)
