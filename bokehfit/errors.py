@@ -34,6 +34,8 @@ class GPUUnavailableError(BokehfitError, RuntimeError):
 
 def check_finite(name: str, value) -> float:
     """``value`` as a float, or ``InputError`` naming ``name`` if it is not a finite number."""
+    if isinstance(value, bool):
+        raise InputError(f"{name} must be a finite number (got {value!r})")
     try:
         number = float(value)
     except (TypeError, ValueError):

@@ -234,6 +234,12 @@ def test_make_aperture_rejects_bad_parameter(args, kwargs, parameter):
         make_aperture(*args, **kwargs)
 
 
+@pytest.mark.parametrize("blades", [float("inf"), float("nan"), "abc", 5.0, True], ids=["inf", "nan", "text", "float", "bool"])
+def test_make_aperture_rejects_non_integer_blades_naming_blades(blades):
+    with pytest.raises(ValueError, match="blades"):
+        make_aperture("ngon", blades=blades)
+
+
 def test_unknown_shape_message_lists_shapes_and_echoes_input():
     with pytest.raises(ValueError) as info:
         make_aperture("hexgon")

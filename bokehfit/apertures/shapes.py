@@ -191,7 +191,7 @@ def make_aperture(
     spec = SHAPES[shape]
     angle_deg = check_finite("angle_deg", angle_deg)
     if spec.takes_blades:
-        if blades is None or isinstance(blades, bool) or int(blades) != blades or not 3 <= blades <= MAX_BLADES:
+        if isinstance(blades, bool) or not isinstance(blades, (int, np.integer)) or not 3 <= blades <= MAX_BLADES:
             raise InputError(f"blades must be an integer from 3 to {MAX_BLADES} for shape 'ngon' (got {blades!r})")
         blades = int(blades)
     elif blades is not None and blades != spec.fixed_blades:

@@ -3,9 +3,11 @@
 The choice, in order: ``BOKEHFIT_ADAPTER`` (a case-insensitive part of the
 adapter's name, e.g. ``llvmpipe`` or ``H100``) and ``BOKEHFIT_BACKEND``
 (``vulkan``, ``metal``, ``d3d12`` or ``gl``) narrow the list of adapters; among
-what is left a discrete GPU wins over an integrated one, over a CPU adapter,
-and Vulkan/Metal/D3D12 over OpenGL. With no adapter at all the error names the
-Debian packages that give Mesa's lavapipe, a software Vulkan adapter.
+what is left a discrete GPU wins over an integrated one, over a CPU adapter.
+Unless ``BOKEHFIT_BACKEND=gl`` asks for it, only the primary backends (Vulkan,
+Metal, D3D12) are opened: OpenGL through wgpu is a last resort, and probing it
+needs a display. With no adapter at all the error names the Debian packages
+that give Mesa's lavapipe, a software Vulkan adapter.
 """
 
 from __future__ import annotations
@@ -16,11 +18,12 @@ from functools import lru_cache
 
 from bokehfit.errors import GPUUnavailableError
 
-__all__ = ["GPUContext", "get_gpu", "ADAPTER_ENV", "BACKEND_ENV"]
+__all__ = ["GPUContext", "get_gpu", "use_headless_egl", "ADAPTER_ENV", "BACKEND_ENV"]
 
 ADAPTER_ENV = "BOKEHFIT_ADAPTER"
 BACKEND_ENV = "BOKEHFIT_BACKEND"
-_BACKENDS = {"vulkan": "Vulkan", "metal": "Metal", "d3d12": "D3D12", "gl": "OpenGL"}
+#: BOKEHFIT_BACKEND value → (wgpu-native instance backend, adapter backend_type).
+_BACKENDS = {"vulkan": ("Vulkan", "Vulkan"), "metal": ("Metal", "Metal"), "d3d12": ("DX12", "D3D12"), "gl": ("GL", "OpenGL")}
 _TYPE_RANK = {"DiscreteGPU": 0, "IntegratedGPU": 1, "VirtualGPU": 2, "CPU": 3}
 NO_ADAPTER_FIX = (
     "install a Vulkan driver; on Debian or Ubuntu `apt-get install libvulkan1 mesa-vulkan-drivers` "
@@ -46,8 +49,13 @@ class GPUContext:
         return f"{self.adapter_name} ({self.backend})"
 
 
-def _rank(info) -> tuple[int, int]:
-    return (_TYPE_RANK.get(info["adapter_type"], 4), 1 if info["backend_type"] == "OpenGL" else 0)
+def use_headless_egl() -> None:
+    """Ask Mesa's EGL for its surfaceless platform (no display server is needed or wanted)."""
+    os.environ.setdefault("EGL_PLATFORM", "surfaceless")
+
+
+def _rank(info) -> int:
+    return _TYPE_RANK.get(info["adapter_type"], 4)
 
 
 @lru_cache(maxsize=1)
@@ -59,18 +67,19 @@ def get_gpu() -> GPUContext:
     GPUUnavailableError
         When wgpu cannot load, no adapter matches, or the device won't open.
     """
-    try:
-        import wgpu
-    except (ImportError, OSError) as error:  # the wgpu-native library failed to load
-        raise GPUUnavailableError(f"cannot load wgpu ({error}); reinstall bokehfit") from None
-
     want_name = os.environ.get(ADAPTER_ENV, "").strip().lower()
     want_backend = os.environ.get(BACKEND_ENV, "").strip().lower()
     if want_backend and want_backend not in _BACKENDS:
-        raise GPUUnavailableError(
-            f"{BACKEND_ENV} must be one of {', '.join(_BACKENDS)} (got {want_backend!r})"
-        )
+        raise GPUUnavailableError(f"{BACKEND_ENV} must be one of {', '.join(_BACKENDS)} (got {want_backend!r})")
+    use_headless_egl()
     try:
+        import wgpu
+        from wgpu.backends.wgpu_native.extras import set_instance_extras
+    except (ImportError, OSError) as error:  # the wgpu-native library failed to load
+        raise GPUUnavailableError(f"cannot load wgpu ({error}); reinstall bokehfit") from None
+
+    try:
+        set_instance_extras(backends=[_BACKENDS[want_backend][0] if want_backend else "Primary"])
         adapters = wgpu.gpu.enumerate_adapters_sync()
     except Exception as error:  # wgpu-native raises its own types for driver failures
         raise GPUUnavailableError(f"no WebGPU adapter could be listed ({error}); {NO_ADAPTER_FIX}") from None
@@ -79,7 +88,7 @@ def get_gpu() -> GPUContext:
         a
         for a in adapters
         if want_name in a.info["device"].lower()
-        and (not want_backend or a.info["backend_type"] == _BACKENDS[want_backend])
+        and (not want_backend or a.info["backend_type"] == _BACKENDS[want_backend][1])
     ]
     if not candidates:
         if not adapters:

@@ -26,7 +26,7 @@ import numpy as np
 
 from bokehfit.apertures import Aperture, make_aperture
 from bokehfit.errors import InputError, check_positive
-from bokehfit.kernels.exact import coverage
+from bokehfit.kernels.exact import coverage, quadrant_area
 
 __all__ = ["METHODS", "SIDES", "Kernel", "KernelClippedWarning", "compute_kernel", "render_kernel"]
 
@@ -90,9 +90,12 @@ def _check_size(size) -> int:
 
 
 def _clipped_fraction(aperture: Aperture, scale: float, size: int) -> float:
-    if aperture.extent() * scale <= size / 2.0:
+    """Share of the disc's area outside the frame (exact; the frame is centred on the light)."""
+    half = size / 2.0
+    if aperture.extent() * scale <= half:
         return 0.0
-    inside = coverage(aperture, scale, size).sum()
+    corners = quadrant_area(aperture, scale, [-half, half], [-half, half])
+    inside = corners[1, 1] - corners[0, 1] - corners[1, 0] + corners[0, 0]
     return max(0.0, 1.0 - inside / (scale * scale))
 
 

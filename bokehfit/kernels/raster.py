@@ -11,13 +11,13 @@ size², whatever the sample count, and one instanced draw call does it all.
 from __future__ import annotations
 
 import math
-import os
 from functools import lru_cache
 
 import numpy as np
 
 from bokehfit.apertures import Aperture
 from bokehfit.errors import GPUUnavailableError
+from bokehfit.gpu.runtime import use_headless_egl
 
 __all__ = ["raster_counts", "gl_renderer"]
 
@@ -54,7 +54,7 @@ void main() {
 
 @lru_cache(maxsize=1)
 def _context():
-    os.environ.setdefault("EGL_PLATFORM", "surfaceless")
+    use_headless_egl()
     import moderngl
 
     try:
