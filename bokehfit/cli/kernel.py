@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from bokehfit.apertures import SHAPES
-from bokehfit.kernels import METHODS, SIDES, Kernel, compute_kernel
+from bokehfit.kernels import METHODS, SAMPLINGS, SIDES, Kernel, compute_kernel
 from bokehfit.outputs import KERNEL_FORMATS, check_output_path, write_kernel_image
 
 __all__ = ["add_parser", "run"]
@@ -24,7 +24,7 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--side", choices=SIDES, default="far", help="light behind (far) or before (near) the focus plane")
     parser.add_argument("--method", choices=list(METHODS), default="exact")
     parser.add_argument("--samples", type=int, default=None, help="point samples over the disc (mc, raster; default 2^22)")
-    parser.add_argument("--sampling", choices=("stratified", "independent"), default="stratified", help="mc sample pattern")
+    parser.add_argument("--sampling", choices=SAMPLINGS, default="stratified", help="mc sample pattern")
     parser.add_argument("--blades", type=int, default=None, help="blade count of an ngon")
     parser.add_argument("--aspect", type=float, default=None, help="width/height of a slit (default 0.3)")
     parser.add_argument("--seed", type=int, default=0)
@@ -52,6 +52,8 @@ def run(args: argparse.Namespace) -> Kernel:
     if kernel.samples is not None:
         line += f", {kernel.samples} samples"
     line += f", {kernel.time_s * 1000:.1f} ms"
+    if kernel.setup_s > 0.01:
+        line += f" (+{kernel.setup_s * 1000:.0f} ms start-up)"
     if kernel.device is not None:
         line += f", on {kernel.device}"
     print(line)

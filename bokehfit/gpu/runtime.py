@@ -13,6 +13,7 @@ that give Mesa's lavapipe, a software Vulkan adapter.
 from __future__ import annotations
 
 import os
+import tempfile
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -50,8 +51,16 @@ class GPUContext:
 
 
 def use_headless_egl() -> None:
-    """Ask Mesa's EGL for its surfaceless platform (no display server is needed or wanted)."""
+    """Prepare the process for headless GPU use, with no display server.
+
+    Mesa's EGL is asked for its surfaceless platform. Vulkan and EGL loaders
+    probe for a Wayland display and, where ``XDG_RUNTIME_DIR`` is unset (as on
+    servers and CI), libwayland prints an error line for each probe; an empty
+    private runtime folder makes the probe fail quietly instead.
+    """
     os.environ.setdefault("EGL_PLATFORM", "surfaceless")
+    if not os.environ.get("XDG_RUNTIME_DIR"):
+        os.environ["XDG_RUNTIME_DIR"] = tempfile.mkdtemp(prefix="bokehfit-runtime-")
 
 
 def _rank(info) -> int:

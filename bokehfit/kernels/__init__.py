@@ -28,9 +28,11 @@ from bokehfit.apertures import Aperture, make_aperture
 from bokehfit.errors import InputError, check_positive
 from bokehfit.kernels.exact import coverage, quadrant_area
 
-__all__ = ["METHODS", "SIDES", "Kernel", "KernelClippedWarning", "compute_kernel", "render_kernel"]
+__all__ = ["METHODS", "SAMPLINGS", "SIDES", "Kernel", "KernelMethod", "KernelClippedWarning", "compute_kernel", "render_kernel"]
 
 SIDES = ("far", "near")
+#: Sample patterns of ``mc``: a jittered grid over u, or independent u.
+SAMPLINGS = ("stratified", "independent")
 #: Default sample count of the sampling methods.
 DEFAULT_SAMPLES = 2**22
 #: Largest kernel frame (pixels a side) and disc diameter accepted.
@@ -52,35 +54,63 @@ class Kernel:
     side: str
     method: str
     samples: int | None  #: point samples over the disc (None for exact)
-    time_s: float
+    time_s: float  #: rendering time
+    setup_s: float  #: one-time start-up before it (adapter, context, shader compilation)
     device: str | None  #: adapter or GL renderer (None for exact)
     clipped_fraction: float  #: share of the disc's light outside the frame
 
 
+@dataclass(frozen=True)
+class KernelMethod:
+    """A registry entry: one-time start-up, then the renderer."""
+
+    #: Opens what the method runs on (adapter, context, compiled shaders);
+    #: returns its description, or None for CPU-only methods.
+    prepare: Callable[[], str | None]
+    #: (aperture, signed scale, size, samples, seed, sampling) →
+    #: (unnormalised coverage, samples drawn or None).
+    render: Callable[..., tuple[np.ndarray, int | None]]
+
+
 def _exact(aperture, scale, size, samples, seed, sampling):
-    return coverage(aperture, abs(scale), size, flip=scale < 0), None, None
+    return coverage(aperture, abs(scale), size, flip=scale < 0), None
+
+
+def _prepare_mc():
+    from bokehfit.gpu import get_gpu
+    from bokehfit.kernels.mc import prepare_pipeline
+
+    prepare_pipeline()
+    return get_gpu().describe()
 
 
 def _mc(aperture, scale, size, samples, seed, sampling):
-    from bokehfit.gpu import get_gpu
     from bokehfit.kernels.mc import mc_counts
 
     counts, drawn = mc_counts(aperture, scale, size, samples, seed, sampling)
-    return counts.astype(np.float64), drawn, get_gpu().describe()
+    return counts.astype(np.float64), drawn
+
+
+def _prepare_raster():
+    from bokehfit.kernels.raster import gl_renderer
+
+    return f"{gl_renderer()} (OpenGL)"
 
 
 def _raster(aperture, scale, size, samples, seed, sampling):
-    from bokehfit.kernels.raster import gl_renderer, raster_counts
+    from bokehfit.kernels.raster import raster_counts
 
     area_px = scale * scale
     passes = max(1, math.ceil(samples / area_px))
     counts, drawn = raster_counts(aperture, scale, size, passes, seed)
-    return counts.astype(np.float64), int(round(drawn * area_px)), f"{gl_renderer()} (OpenGL)"
+    return counts.astype(np.float64), int(round(drawn * area_px))
 
 
-#: Method name → function(aperture, signed scale, size, samples, seed, sampling)
-#: returning (unnormalised coverage, samples drawn, device description).
-METHODS: dict[str, Callable] = {"exact": _exact, "mc": _mc, "raster": _raster}
+METHODS: dict[str, KernelMethod] = {
+    "exact": KernelMethod(lambda: None, _exact),
+    "mc": KernelMethod(_prepare_mc, _mc),
+    "raster": KernelMethod(_prepare_raster, _raster),
+}
 
 
 def _check_size(size) -> int:
@@ -123,8 +153,8 @@ def compute_kernel(
         raise InputError(f"side must be one of {', '.join(SIDES)} (got {side!r})")
     if method not in METHODS:
         raise InputError(f"method must be one of {', '.join(METHODS)} (got {method!r})")
-    if sampling not in ("stratified", "independent"):
-        raise InputError(f"sampling must be 'stratified' or 'independent' (got {sampling!r})")
+    if sampling not in SAMPLINGS:
+        raise InputError(f"sampling must be one of {', '.join(SAMPLINGS)} (got {sampling!r})")
     if samples is None:
         samples = DEFAULT_SAMPLES
     if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or not 1 <= samples <= 2**31:
@@ -137,8 +167,10 @@ def compute_kernel(
     scale = diameter_px * math.sqrt(math.pi) / 2.0
     signed_scale = scale if side == "far" else -scale
     start = time.perf_counter()
-    counts, drawn, device = METHODS[method](aperture, signed_scale, size, int(samples), int(seed), sampling)
-    elapsed = time.perf_counter() - start
+    device = METHODS[method].prepare()
+    prepared = time.perf_counter()
+    counts, drawn = METHODS[method].render(aperture, signed_scale, size, int(samples), int(seed), sampling)
+    elapsed = time.perf_counter() - prepared
     total = counts.sum()
     if not total > 0.0:
         raise InputError(f"the disc falls outside the {size}×{size} frame (diameter_px={diameter_px:g})")
@@ -152,7 +184,7 @@ def compute_kernel(
             stacklevel=3,
         )
     image = (counts / total).astype(np.float32)
-    return Kernel(image, aperture, diameter_px, side, method, drawn, elapsed, device, clipped)
+    return Kernel(image, aperture, diameter_px, side, method, drawn, elapsed, prepared - start, device, clipped)
 
 
 def render_kernel(

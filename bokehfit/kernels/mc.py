@@ -20,7 +20,7 @@ from bokehfit.gpu import get_gpu
 from bokehfit.gpu.layout import Struct
 from bokehfit.gpu.shaders import load_shader
 
-__all__ = ["KERNEL_PARAMS", "SAMPLINGS", "mc_counts"]
+__all__ = ["KERNEL_PARAMS", "mc_counts", "prepare_pipeline"]
 
 KERNEL_PARAMS = Struct(
     "KernelParams",
@@ -38,7 +38,6 @@ KERNEL_PARAMS = Struct(
         ("sin_angle", "f32"),
     ),
 )
-SAMPLINGS = ("stratified", "independent")
 #: Most samples one dispatch takes (the sample index and its stride stay in u32).
 MAX_SAMPLES = 2**31
 _WORKGROUP = 256
@@ -46,7 +45,8 @@ _SAMPLES_PER_THREAD = 16
 
 
 @lru_cache(maxsize=None)
-def _pipeline():
+def prepare_pipeline():
+    """Open the GPU and compile ``kernel_mc.wgsl`` (once per process)."""
     import wgpu
 
     device = get_gpu().device
@@ -85,7 +85,7 @@ def mc_counts(aperture: Aperture, scale: float, size: int, samples: int, seed: i
     )
     uniform = device.create_buffer_with_data(data=params, usage=wgpu.BufferUsage.UNIFORM)
     counts = device.create_buffer(size=4 * size * size, usage=wgpu.BufferUsage.STORAGE | wgpu.BufferUsage.COPY_SRC)
-    pipeline = _pipeline()
+    pipeline = prepare_pipeline()
     bind_group = device.create_bind_group(
         layout=pipeline.get_bind_group_layout(0),
         entries=[
