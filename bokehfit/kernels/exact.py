@@ -22,7 +22,7 @@ The result is exact up to float64 rounding (about 1e-12 per pixel for a
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Callable
 
 import numpy as np
@@ -116,15 +116,20 @@ def quadrant_area(aperture: Aperture, scale: float, xs: np.ndarray, ys: np.ndarr
     return total
 
 
-def coverage(aperture: Aperture, scale: float, size: int, flip: bool = False) -> np.ndarray:
+def coverage(
+    aperture: Aperture, scale: float, size: int, flip: bool = False, offset_xy: tuple[float, float] = (0.0, 0.0)
+) -> np.ndarray:
     """Area of the scaled aperture on each pixel of a size × size grid (float64).
 
     The aperture's centre lies at ((size−1)/2, (size−1)/2) in pixel-centre
-    coordinates; y is up on screen (design.md §2). ``flip`` rotates it by 180°.
+    coordinates, moved by ``offset_xy`` (x right, y up on screen, design.md §2).
+    ``flip`` rotates the shape by 180° about its centre.
     """
     centre = (size - 1) / 2.0
     edges = np.arange(size + 1, dtype=np.float64) - 0.5 - centre  # pixel borders, aperture frame
-    cumulative = quadrant_area(aperture, scale, edges, edges)
+    if flip:
+        aperture = replace(aperture, angle_deg=aperture.angle_deg + 180.0)
+    dx, dy = offset_xy
+    cumulative = quadrant_area(aperture, scale, edges - dx, edges - dy)
     cells = cumulative[1:, 1:] - cumulative[:-1, 1:] - cumulative[1:, :-1] + cumulative[:-1, :-1]
-    cells = np.clip(cells[::-1, :], 0.0, 1.0)  # rows of `cells` run up in y; image rows run down
-    return cells[::-1, ::-1].copy() if flip else cells  # 180° about the centre pixel
+    return np.clip(cells[::-1, :], 0.0, 1.0)  # rows of `cells` run up in y; image rows run down
