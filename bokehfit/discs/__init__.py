@@ -9,22 +9,27 @@ states the criteria). The result is a :class:`DiscSearch`, falsy with a
 
 from __future__ import annotations
 
+import math
 import time
 from collections import Counter
 from dataclasses import dataclass, field
 
+import cv2
 import numpy as np
+from scipy.spatial import cKDTree
 
-from bokehfit.discs.candidates import find_candidates
-from bokehfit.discs.measure import RESOLVABLE_PX, Measurement, measure_blob
+from bokehfit.discs.candidates import Candidate, find_candidates
+from bokehfit.discs.measure import RESOLVABLE_PX, Measurement, measure_candidate
 from bokehfit.errors import InputError
 
 __all__ = ["Disc", "DiscSearch", "find_discs", "DEFAULT_MIN_DIAMETER_PX", "DEFAULT_MAX_DIAMETER_PX"]
 
 DEFAULT_MIN_DIAMETER_PX = 4.0
 DEFAULT_MAX_DIAMETER_PX = 500.0
-#: Blobs smaller than this share of the smallest disc's area are not measured at all.
-_MIN_BLOB_SHARE = 0.3
+#: Most candidates measured (the strongest first); the rest are counted as rejected.
+MAX_CANDIDATES = 5000
+#: Noise floor of the local noise estimate (linear units).
+MIN_NOISE = 1e-4
 
 
 @dataclass(frozen=True)
@@ -77,7 +82,6 @@ class DiscSearch:
     discs: list[Disc]
     candidates: int
     rejected: Counter = field(default_factory=Counter)
-    noise_sigma: float = 0.0
     time_s: float = 0.0
 
     def __bool__(self) -> bool:
@@ -106,6 +110,50 @@ def _check_image(luminance) -> np.ndarray:
     if not np.isfinite(luminance).all():
         raise InputError("luminance contains NaN or Inf values")
     return luminance
+
+
+def _distinct(candidates: list[Candidate]) -> list[Candidate]:
+    """Strongest first; drop a candidate that repeats a stronger one (same place, similar size)."""
+    kept: list[Candidate] = []
+    if not candidates:
+        return kept
+    order = sorted(candidates, key=lambda c: -c.strength)
+    centres = np.array([c.center_xy for c in order])
+    tree = cKDTree(centres)
+    taken = np.zeros(len(order), dtype=bool)
+    for i, c in enumerate(order):
+        if taken[i]:
+            continue
+        kept.append(c)
+        for j in tree.query_ball_point(c.center_xy, 0.5 * c.diameter_px + 1.0):
+            if 0.4 <= order[j].diameter_px / c.diameter_px <= 2.5:
+                taken[j] = True
+    return kept
+
+
+def _inside_any(point: tuple[float, float], measurements: list[Measurement]) -> bool:
+    x, y = point
+    for m in measurements:
+        outline = m.outline_xy
+        if (outline[:, 0].min() <= x <= outline[:, 0].max() and outline[:, 1].min() <= y <= outline[:, 1].max()
+                and cv2.pointPolygonTest(outline.astype(np.float32), (float(x), float(y)), False) >= 0):
+            return True
+    return False
+
+
+def _flag_neighbours(measurements: list[Measurement]) -> list[bool]:
+    """True for discs whose outline reaches into another disc's extent."""
+    if len(measurements) < 2:
+        return [m.overlaps for m in measurements]
+    centres = np.array([m.center_xy for m in measurements])
+    reach = np.array([np.max(np.hypot(*(m.outline_xy - m.center_xy).T)) for m in measurements])
+    tree = cKDTree(centres)
+    flags = []
+    for i, m in enumerate(measurements):
+        near = tree.query_ball_point(m.center_xy, reach[i] + reach.max())
+        touching = any(j != i and np.hypot(*(centres[j] - centres[i])) < reach[i] + reach[j] for j in near)
+        flags.append(m.overlaps or touching)
+    return flags
 
 
 def find_discs(
@@ -145,31 +193,38 @@ def find_discs(
         )
     if max_discs is not None and max_discs < 1:
         raise InputError(f"max_discs must be at least 1 (got {max_discs})")
-    found = find_candidates(luminance, max_diameter_px)
-    min_blob_area = _MIN_BLOB_SHARE * np.pi * (min_diameter_px / 2.0) ** 2
-    labels = [k for k in range(1, len(found.stats)) if found.stats[k, 4] >= min_blob_area]
+    candidates = _distinct(find_candidates(luminance, min_diameter_px, max_diameter_px))
     rejected: Counter = Counter()
-    rejected["too small"] += len(found.stats) - 1 - len(labels)
-    measurements: list[Measurement] = []
-    iterator = labels
-    if progress and len(labels) > 200:
+    if len(candidates) > MAX_CANDIDATES:
+        rejected["beyond the candidate limit"] = len(candidates) - MAX_CANDIDATES
+        candidates = candidates[:MAX_CANDIDATES]
+    candidates.sort(key=lambda c: -c.diameter_px)  # a larger disc claims the candidates inside it
+    iterator = candidates
+    if progress and len(candidates) > 200:
         from tqdm import tqdm
 
-        iterator = tqdm(labels, desc="measuring discs", unit="blob", leave=False)
-    for label in iterator:
-        left, top, width, height, _ = found.stats[label]
-        m = measure_blob(luminance, clipped, found.labels, label, (left, top, width, height), found.noise_sigma, min_diameter_px)
-        if m is None:
-            rejected["no closed outline"] += 1
+        iterator = tqdm(candidates, desc="measuring discs", unit="candidate", leave=False)
+    measurements: list[Measurement] = []
+    for candidate in iterator:
+        if _inside_any(candidate.center_xy, measurements):
+            rejected["inside a larger disc"] += 1
+            continue
+        m = measure_candidate(
+            luminance, clipped, candidate.center_xy, candidate.diameter_px, candidate.extent_px, MIN_NOISE, min_diameter_px
+        )
+        if isinstance(m, str):
+            rejected[m] += 1
         elif m.reason is not None:
             rejected[m.reason] += 1
         elif m.diameter_px > max_diameter_px:
             rejected["too large"] += 1
         else:
             measurements.append(m)
+    measurements = _distinct_measurements(measurements)
     measurements.sort(key=lambda m: -m.diameter_px)
     if max_discs is not None:
         measurements = measurements[:max_discs]
+    overlaps = _flag_neighbours(measurements)
     discs = [
         Disc(
             index=i,
@@ -181,9 +236,22 @@ def find_discs(
             snr=m.snr,
             saturated=m.saturated,
             clipped=m.clipped,
-            overlaps=m.overlaps,
+            overlaps=overlap,
             resolvable=m.diameter_px >= RESOLVABLE_PX,
         )
-        for i, m in enumerate(measurements)
+        for i, (m, overlap) in enumerate(zip(measurements, overlaps))
     ]
-    return DiscSearch(discs, len(found.stats) - 1, +rejected, found.noise_sigma, time.perf_counter() - start)
+    return DiscSearch(discs, len(candidates), +rejected, time.perf_counter() - start)
+
+
+def _distinct_measurements(measurements: list[Measurement]) -> list[Measurement]:
+    """One measurement per disc: two candidates that converged on the same outline count once."""
+    kept: list[Measurement] = []
+    for m in sorted(measurements, key=lambda m: -m.snr):
+        if not any(
+            math.hypot(m.center_xy[0] - k.center_xy[0], m.center_xy[1] - k.center_xy[1]) < 0.25 * k.diameter_px
+            and 0.75 < m.diameter_px / k.diameter_px < 1.33
+            for k in kept
+        ):
+            kept.append(m)
+    return kept

@@ -1,77 +1,120 @@
-"""Highlight candidates: pixels well above the local background, grouped into blobs.
+"""Highlight candidates at several scales: blobs well above their local background.
 
 Notes
 -----
-The background is a grey-scale morphological opening of the luminance with a
-square wider than the largest bokeh disc sought, computed on a reduced copy (a
-24-megapixel photo is opened at about 1/8 scale) and smoothed: an opening
-removes every bright structure narrower than its element and follows smooth
-gradients. The noise level is the median absolute deviation of the residual
-(robust as long as discs cover less than half of the frame), times 1.4826.
-A pixel is a candidate where the residual exceeds ``SIGMA_THRESHOLD`` noise
-levels and ``RELATIVE_THRESHOLD`` of the brightest residual; candidates are
-8-connected components. Discs from 4 px up to ``max_diameter_px`` are found at
-one threshold because the background model, not the threshold, carries the scale.
+Disc diameters are split into octave bands [s, 2s) with s = 4, 8, 16, … px.
+Band s is searched on a copy reduced by ``f = max(1, s / BAND_SIDE_PX)``
+(area averaging), so its discs are 8 to 16 px across there whatever their size,
+and every band costs about the same. On that copy:
+
+- the background is a grey-scale morphological opening with a square wider
+  than the band's largest disc (a square that fits inside no disc of the band
+  removes them all, and follows smooth gradients and broader light);
+- the noise level σ is 1.4826 × the median absolute deviation of the residual
+  (image − background): sensor noise and the texture at that scale;
+- blobs are 8-connected pixels above ``SIGMA_THRESHOLD`` σ, each cut at half
+  its peak (the half-peak region has the disc's size, where the low threshold
+  also takes in blur and glow, and glow-joined discs come apart); regions whose
+  equal-area diameter (in full-resolution pixels) lies in the band, whose peak
+  exceeds ``PEAK_SIGMA`` σ and the contrast floors become candidates.
+
+Each candidate is measured at full resolution by :mod:`bokehfit.discs.measure`;
+one disc seen in two bands is kept once.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
-__all__ = ["Candidates", "find_candidates", "SIGMA_THRESHOLD", "RELATIVE_THRESHOLD"]
+__all__ = ["Candidate", "find_candidates", "SIGMA_THRESHOLD", "PEAK_SIGMA", "MIN_CONTRAST_ABS", "MIN_CONTRAST_REL"]
 
-#: Residual above the background, in noise standard deviations, for a candidate pixel.
-SIGMA_THRESHOLD = 6.0
-#: ... and as a share of the 99.9th percentile residual (ignores faint texture
-#: in photos whose highlights are far brighter than their noise).
-RELATIVE_THRESHOLD = 0.04
-#: Side of the reduced copy on which the background is estimated.
-BACKGROUND_SIDE_PX = 640
-#: Noise floor: 8-bit quantisation of linear light near black is about this.
+#: Blob pixels: residual above this many noise levels.
+SIGMA_THRESHOLD = 4.0
+#: Candidates: peak residual above this many noise levels.
+PEAK_SIGMA = 5.0
+#: Contrast floors, whatever the noise (linear units, and relative to the
+#: background): flat JPEG areas have almost no noise, yet their block
+#: artefacts are a few codes high.
+MIN_CONTRAST_ABS = 0.003
+MIN_CONTRAST_REL = 0.15
+#: Smallest disc of a band, in pixels of the reduced copy it is searched on.
+BAND_SIDE_PX = 8.0
+#: Bands overlap by these factors, so that a disc at a band's edge, measured a
+#: little differently on the two reduced copies, is a candidate in at least one.
+BAND_OVERLAP_LOW = 0.8
+BAND_OVERLAP_HIGH = 1.25
+#: Noise floor (linear units).
 MIN_NOISE = 1e-4
 
 
 @dataclass(frozen=True)
-class Candidates:
-    """Connected blobs of bright pixels and what they were measured against."""
+class Candidate:
+    """A bright blob: where, about how big, how strong."""
 
-    labels: np.ndarray  #: int32 (H, W), 0 = background, k = blob k
-    stats: np.ndarray  #: cv2 stats rows (left, top, width, height, area), blob k at row k
-    background: np.ndarray  #: float32 (H, W) background estimate
-    noise_sigma: float
-    threshold: float  #: residual a candidate pixel exceeds
+    center_xy: tuple[float, float]  #: full-resolution (column, row)
+    diameter_px: float  #: equal-area diameter of the half-peak region
+    extent_px: float  #: half the longer side of its bounding box
+    strength: float  #: peak residual in noise levels of its band
 
 
-def _background(luminance: np.ndarray, max_diameter_px: float) -> np.ndarray:
+def _label_maxima(values: np.ndarray, labels: np.ndarray, count: int) -> np.ndarray:
+    """Largest value under each label 0 … count − 1."""
+    maxima = np.full(count, -np.inf, dtype=np.float32)
+    np.maximum.at(maxima, labels.ravel(), values.ravel())
+    return maxima
+
+
+def _band_candidates(luminance: np.ndarray, band: float, min_diameter: float) -> list[Candidate]:
     height, width = luminance.shape
-    factor = max(1.0, max(height, width) / BACKGROUND_SIDE_PX)
-    small = cv2.resize(
-        luminance, (max(1, round(width / factor)), max(1, round(height / factor))), interpolation=cv2.INTER_AREA
-    )
-    # A square wider than the largest disc fits inside no disc, so the opening
-    # removes every disc; OpenCV opens with a rectangle in separable passes,
-    # at a cost independent of its size.
-    radius = max(2, int(np.ceil(0.55 * max_diameter_px / factor)))
-    element = cv2.getStructuringElement(cv2.MORPH_RECT, (2 * radius + 1, 2 * radius + 1))
-    opened = cv2.morphologyEx(small, cv2.MORPH_OPEN, element, borderType=cv2.BORDER_REFLECT)
-    opened = cv2.GaussianBlur(opened, (0, 0), radius / 2.0, borderType=cv2.BORDER_REFLECT)
-    # The blur lifts the floor next to bright regions; the background never exceeds the image.
-    opened = np.minimum(opened, small)
-    return cv2.resize(opened, (width, height), interpolation=cv2.INTER_LINEAR)
-
-
-def find_candidates(luminance: np.ndarray, max_diameter_px: float) -> Candidates:
-    """Blobs of pixels well above the local background (see the module notes)."""
-    background = _background(luminance, max_diameter_px)
-    residual = luminance - background
-    sample = residual[:: max(1, residual.shape[0] // 512), :: max(1, residual.shape[1] // 512)]
+    factor = max(1.0, band / BAND_SIDE_PX)
+    if factor > 1.0:
+        size = (max(1, round(width / factor)), max(1, round(height / factor)))
+        image = cv2.resize(luminance, size, interpolation=cv2.INTER_AREA)
+    else:
+        image = luminance
+    side = 2 * math.ceil(2.0 * band / factor) + 3
+    element = cv2.getStructuringElement(cv2.MORPH_RECT, (side, side))
+    background = cv2.morphologyEx(image, cv2.MORPH_OPEN, element, borderType=cv2.BORDER_REFLECT)
+    residual = image - background
+    step = max(1, round(math.sqrt(residual.size / 250_000)))
+    sample = residual[::step, ::step]
     median = float(np.median(sample))
-    noise_sigma = max(MIN_NOISE, 1.4826 * float(np.median(np.abs(sample - median))))
-    top = float(np.percentile(sample, 99.9))
-    threshold = max(SIGMA_THRESHOLD * noise_sigma, RELATIVE_THRESHOLD * top)
-    mask = (residual > threshold).astype(np.uint8)
-    count, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8, ltype=cv2.CV_32S)
-    return Candidates(labels, stats, background, noise_sigma, threshold)
+    sigma = max(MIN_NOISE, 1.4826 * float(np.median(np.abs(sample - median))))
+    count, labels = cv2.connectedComponents((residual > SIGMA_THRESHOLD * sigma).view(np.uint8), connectivity=8)
+    if count <= 1:
+        return []
+    peaks = _label_maxima(residual, labels, count)
+    peaks[0] = np.inf  # background pixels never pass
+    count, labels, stats, centroids = cv2.connectedComponentsWithStats(
+        (residual >= 0.5 * peaks[labels]).view(np.uint8), connectivity=8, ltype=cv2.CV_32S
+    )
+    diameters = 2.0 * np.sqrt(stats[:, cv2.CC_STAT_AREA] / math.pi) * factor
+    low = min_diameter if band <= min_diameter * 1.01 else BAND_OVERLAP_LOW * band
+    peaks = _label_maxima(residual, labels, count)
+    floor = np.maximum(MIN_CONTRAST_ABS, MIN_CONTRAST_REL * _label_maxima(background, labels, count))
+    keep = (diameters >= low) & (diameters < BAND_OVERLAP_HIGH * 2.0 * band)
+    keep &= (peaks >= PEAK_SIGMA * sigma) & (peaks >= floor)
+    keep[0] = False
+    return [
+        Candidate(
+            ((centroids[k, 0] + 0.5) * factor - 0.5, (centroids[k, 1] + 0.5) * factor - 0.5),
+            float(diameters[k]),
+            0.5 * max(stats[k, cv2.CC_STAT_WIDTH], stats[k, cv2.CC_STAT_HEIGHT]) * factor,
+            float(peaks[k] / sigma),
+        )
+        for k in np.nonzero(keep)[0]
+    ]
+
+
+def find_candidates(luminance: np.ndarray, min_diameter_px: float, max_diameter_px: float) -> list[Candidate]:
+    """Candidates of every octave band from ``min_diameter_px`` to ``max_diameter_px``."""
+    candidates: list[Candidate] = []
+    band = min_diameter_px
+    while band < max_diameter_px:
+        candidates.extend(_band_candidates(luminance, band, min_diameter_px))
+        band *= 2.0
+    return candidates

@@ -2,23 +2,37 @@
 
 Notes
 -----
-Levels: the local background ``b`` is the median of a ring of pixels around the
-blob that belong to no blob; the plateau ``p`` is the 90th percentile of the
-blob (robust to noise, and the rim level of ring-shaped "soap-bubble" discs).
-The outline is the sub-pixel iso-contour at the 50 % level ``b + (p − b)/2``
-(marching squares), closed along the frame where the disc is cut by it.
+Levels, around a candidate of approximate radius r: the local background ``b``
+is the median of the annulus from 1.3 r to 1.7 r (plus a few pixels), the local
+noise the scaled median absolute deviation of that annulus (sensor noise and
+texture around the disc), and the plateau ``p`` the 90th percentile of the
+pixels within 0.8 r (robust to noise, and the rim of ring-shaped
+"soap-bubble" discs). The outline is the sub-pixel iso-contour at the 50 %
+level ``b + (p − b)/2`` (marching squares) around the candidate's centre,
+closed along the frame where the frame cuts the disc. A second pass repeats
+this with the measured centre and size. Where the outline runs on into
+neighbouring light (discs that touch, a bright region), the disc is cut out by
+a circle of 1.3 r + 2 px and flagged ``overlaps``.
 
-A blob is kept as a disc when all of these hold (the rejection reasons):
+A candidate is kept as a disc when all of these hold (the rejection reasons):
 
 ``too small``       equal-area diameter below the minimum (default 4 px);
-``faint``           plateau contrast ``p − b`` below ``MIN_SNR`` noise levels;
-``soft edge``       the edge is wide for the size: the radii of the filled regions
-                    above 25 % and 75 % differ by more than
-                    ``max(EDGE_WIDTH_MIN_PX, EDGE_WIDTH_MAX_REL · r)``; a flat
-                    disc has a narrow edge, an in-focus glint or a smooth blob
-                    (Gaussian: 0.77·r) does not;
+``faint``           plateau contrast ``p − b`` below ``MIN_SNR`` local noise levels,
+                    below ``MIN_CONTRAST_ABS`` (linear) or below
+                    ``MIN_CONTRAST_REL`` of the background;
+``no outline``      no 50 % contour around the centre;
+``part of a larger region``  the outline, cut out of a bright region, lies
+                    mostly on the cutting circle;
+``soft edge``       the edge is wide for the size: the edge width, contrast over
+                    the median gradient along the outline, exceeds
+                    ``max(EDGE_WIDTH_MIN_PX, EDGE_WIDTH_MAX_REL · r)``. A flat disc
+                    blurred by b px has 2.5 b; an in-focus glint or a smooth
+                    blob (Gaussian: 1.44 r) much more. Measured on the outline,
+                    it is not fooled by neighbouring discs;
 ``not compact``     solidity (area over convex-hull area) below ``MIN_SOLIDITY``
                     (the star has 0.68): edges, branches, texture;
+``in a clipped region``  saturated, and the clipping goes on past its outline
+                    (more than ``MAX_CLIPPED_RING_SHARE`` of a 2-px ring);
 ``elongated``       the minimum-area rectangle's sides differ by more than
                     ``MAX_ELONGATION`` (a slit of aspect 0.26 still passes).
 """
@@ -30,23 +44,37 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+from scipy import ndimage
 from skimage import measure
 
-__all__ = ["Measurement", "measure_blob", "MIN_SNR", "MIN_SOLIDITY", "MAX_ELONGATION", "RESOLVABLE_PX"]
+from bokehfit.discs.candidates import MIN_CONTRAST_ABS, MIN_CONTRAST_REL
 
-MIN_SNR = 8.0
+__all__ = ["Measurement", "measure_candidate", "MIN_SNR", "MIN_SOLIDITY", "MAX_ELONGATION", "RESOLVABLE_PX"]
+
+MIN_SNR = 4.0
+#: The search window grows by these factors while the outline runs into it.
+WINDOW_GROWTH = (1.0, 2.0, 4.0)
+#: A disc cut out of a larger bright region whose outline lies mostly on the
+#: cutting circle is a piece of that region, not a disc.
+MAX_CUT_SHARE = 0.5
 #: The star, the least compact aperture, has solidity 0.68.
 MIN_SOLIDITY = 0.6
-#: A concavity deeper than this share of the equal-area radius marks overlapping discs
-#: when there are 2 to 4 of them (two discs make two; the star's five are its own).
-OVERLAP_DEFECT_DEPTH = 0.12
+#: A concavity deeper than this share of the equal-area radius (and than
+#: OVERLAP_DEFECT_MIN_PX) marks overlapping discs when there are 2 to 4 of them:
+#: two discs make two; the star's five are its own; outline noise stays below 0.2 px.
+OVERLAP_DEFECT_DEPTH = 0.04
+OVERLAP_DEFECT_MIN_PX = 1.0
+_SUBPIXEL = 16
 MAX_ELONGATION = 15.0
-EDGE_WIDTH_MIN_PX = 1.6
-EDGE_WIDTH_MAX_REL = 0.45
+EDGE_WIDTH_MIN_PX = 3.0
+EDGE_WIDTH_MAX_REL = 0.6
 #: Equal-area diameter from which a disc shows its shape.
 RESOLVABLE_PX = 8.0
 #: Share of a disc's pixels that may be clipped in the source before it counts as saturated.
 SATURATED_SHARE = 0.002
+#: A saturated "disc" whose surrounding ring is clipped beyond this share is a
+#: piece of a larger clipped region (the sun, a window), not a disc.
+MAX_CLIPPED_RING_SHARE = 0.3
 
 
 @dataclass(frozen=True)
@@ -65,31 +93,27 @@ class Measurement:
     edge_width_px: float
     saturated: bool
     clipped: bool
-    overlaps: bool
+    overlaps: bool  #: cut out of a larger bright region, or shaped like two to four merged discs
     reason: str | None
 
 
-def _dilate(mask: np.ndarray, radius: int) -> np.ndarray:
-    element = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
-    return cv2.dilate(mask.view(np.uint8), element).view(bool)
+
+def _annulus_levels(crop: np.ndarray, distance: np.ndarray, radius: float) -> tuple[float, float]:
+    """Median and robust spread of the annulus 1.3 r … 1.7 r (+ 2 px) around the centre."""
+    ring = crop[(distance >= 1.3 * radius + 1.0) & (distance <= 1.7 * radius + 3.0)]
+    if ring.size < 8:
+        ring = crop[distance >= 1.3 * radius + 1.0]
+    median = float(np.median(ring))
+    return median, 1.4826 * float(np.median(np.abs(ring - median)))
 
 
-def _levels(crop: np.ndarray, blob: np.ndarray, others: np.ndarray) -> tuple[float, float]:
-    ring_width = max(2, int(math.sqrt(blob.sum()) * 0.25))
-    distance = cv2.distanceTransform((~blob).view(np.uint8), cv2.DIST_L2, 3)
-    ring = (distance > 1.5) & (distance <= ring_width + 1.5) & ~others
-    background = float(np.median(crop[ring])) if ring.any() else float(crop[~blob].min(initial=0.0))
-    plateau = float(np.percentile(crop[blob], 90))
-    return background, plateau
-
-
-def _filled_radius(crop: np.ndarray, blob: np.ndarray, level: float) -> float:
-    """Equal-area radius of the blob's pixels at or above ``level``, holes filled."""
-    above = ((crop >= level) & blob).view(np.uint8)
-    contours, _ = cv2.findContours(above, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
-    filled = np.zeros_like(above)
-    cv2.drawContours(filled, contours, -1, 1, thickness=cv2.FILLED)
-    return math.sqrt(float(filled.sum()) / math.pi)
+def _edge_gradient(crop: np.ndarray, outline: np.ndarray) -> float:
+    """Median gradient magnitude of the image along the outline (bilinear samples)."""
+    gy, gx = np.gradient(crop.astype(np.float32))
+    coords = [outline[:, 1], outline[:, 0]]  # (row, col)
+    gx_at = ndimage.map_coordinates(gx, coords, order=1, mode="nearest")
+    gy_at = ndimage.map_coordinates(gy, coords, order=1, mode="nearest")
+    return float(np.median(np.hypot(gx_at, gy_at)))
 
 
 def _outline(crop: np.ndarray, level: float, background: float, seed_rc: tuple[float, float]) -> np.ndarray | None:
@@ -110,15 +134,18 @@ def _outline(crop: np.ndarray, level: float, background: float, seed_rc: tuple[f
 
 def _deep_concavities(outline: np.ndarray, depth_px: float) -> int:
     """Number of concavities of the outline deeper than ``depth_px``."""
-    points = outline.astype(np.float32)
-    hull = cv2.convexHull(points, returnPoints=False)
+    fixed = np.round(outline * _SUBPIXEL).astype(np.int32)  # OpenCV wants integer points
+    hull = cv2.convexHull(fixed, returnPoints=False)
     if len(hull) < 3:
         return 0
     try:
-        defects = cv2.convexityDefects(points, np.sort(hull, axis=0))
-    except cv2.error:  # self-intersecting outlines (a hull that is not monotone)
+        defects = cv2.convexityDefects(fixed, np.sort(hull, axis=0))
+    except cv2.error:  # a self-touching outline whose hull is not monotone
         return 0
-    return 0 if defects is None else int((defects[:, 0, 3] / 256.0 > depth_px).sum())
+    if defects is None:
+        return 0
+    depths = defects.reshape(-1, 4)[:, 3] / (256.0 * _SUBPIXEL)  # depth is 24.8 fixed point
+    return int((depths > depth_px).sum())
 
 
 def _polygon_area_centroid(xy: np.ndarray) -> tuple[float, float, float]:
@@ -133,64 +160,114 @@ def _polygon_area_centroid(xy: np.ndarray) -> tuple[float, float, float]:
     return abs(area), float(cx), float(cy)
 
 
-def measure_blob(
+def _window(luminance: np.ndarray, center_xy: tuple[float, float], half: int):
+    height, width = luminance.shape
+    col, row = int(round(center_xy[0])), int(round(center_xy[1]))
+    r0, c0 = max(0, row - half), max(0, col - half)
+    r1, c1 = min(height, row + half + 1), min(width, col + half + 1)
+    rows, cols = np.ogrid[r0 - center_xy[1] : r1 - center_xy[1], c0 - center_xy[0] : c1 - center_xy[0]]
+    return (r0, c0, r1, c1), np.sqrt(rows * rows + cols * cols)
+
+
+def _closed_outline(luminance, center_xy, radius, reach):
+    """Levels and the closed 50 % outline around ``center_xy``, growing the window
+    while the outline runs into it; the last window masks beyond ``reach`` instead
+    (the disc then touches a neighbour). Returns (window, crop, levels, outline, merged)."""
+    height, width = luminance.shape
+    for grow in WINDOW_GROWTH:
+        half = int(math.ceil(grow * max(1.7 * radius + 4.0, reach)))
+        window, distance = _window(luminance, center_xy, half)
+        r0, c0, r1, c1 = window
+        crop = luminance[r0:r1, c0:c1]
+        background, noise = _annulus_levels(crop, distance, radius)
+        core = crop[distance <= max(0.8 * radius, 0.75)]
+        plateau = float(np.percentile(core, 90)) if core.size else background
+        level = background + 0.5 * (plateau - background)
+        if not _contrast_ok(plateau - background, noise, background):
+            return "faint"
+        seed_rc = (center_xy[1] - r0, center_xy[0] - c0)
+        outline = _outline(crop, level, background, seed_rc)
+        if outline is None:
+            return "no outline"
+        if not _open_in_window(outline, crop.shape, window, (height, width)):
+            return window, crop, (background, plateau, noise), outline, False
+    # Still open: part of a larger bright structure, or discs run together. Cut
+    # the disc out of it with a circle through its neighbours' gap.
+    masked = np.where(distance <= reach, crop, min(background, level - 1e-6)).astype(np.float32)
+    outline = _outline(masked, level, background, seed_rc)
+    if outline is None:
+        return "no outline"
+    on_cut = np.abs(np.hypot(outline[:, 0] - seed_rc[1], outline[:, 1] - seed_rc[0]) - reach) < 1.0
+    if on_cut.mean() > MAX_CUT_SHARE:  # mostly the cutting circle: a piece of something larger
+        return "part of a larger region"
+    return window, crop, (background, plateau, noise), outline, True
+
+
+def _contrast_ok(contrast: float, noise: float, background: float) -> bool:
+    return contrast >= max(MIN_SNR * noise, MIN_CONTRAST_ABS, MIN_CONTRAST_REL * background)
+
+
+def measure_candidate(
     luminance: np.ndarray,
     clipped_mask: np.ndarray | None,
-    labels: np.ndarray,
-    label: int,
-    box: tuple[int, int, int, int],
-    noise_sigma: float,
+    center_xy: tuple[float, float],
+    diameter_px: float,
+    extent_px: float,
+    min_noise: float,
     min_diameter_px: float,
-) -> Measurement | None:
-    """Measure blob ``label`` whose bounding box is (left, top, width, height)."""
+) -> Measurement | str:
+    """Measure the disc around ``center_xy`` of about ``diameter_px``, reaching about
+    ``extent_px`` from its centre; a rejection reason where there is no disc to measure.
+
+    Two passes: the first uses the candidate's size for the levels, the second
+    the size it measured.
+    """
     height, width = luminance.shape
-    left, top, box_w, box_h = box
-    margin = max(3, int(0.35 * max(box_w, box_h)))
-    r0, c0 = max(0, top - margin), max(0, left - margin)
-    r1, c1 = min(height, top + box_h + margin), min(width, left + box_w + margin)
-    crop = luminance[r0:r1, c0:c1]
-    crop_labels = labels[r0:r1, c0:c1]
-    blob = crop_labels == label
-    others = (crop_labels != 0) & ~blob
-    background, plateau = _levels(crop, blob, others)
+    radius = max(1.0, 0.5 * diameter_px)
+    reach = max(radius, extent_px)
+    found = None
+    for _ in range(2):
+        found = _closed_outline(luminance, center_xy, radius, 1.3 * reach + 2.0)
+        if isinstance(found, str):
+            return found
+        (r0, c0, _, _), _, _, outline, merged = found
+        area, cx, cy = _polygon_area_centroid(outline)
+        if merged or area <= 0:
+            break
+        center_xy, radius = (cx + c0, cy + r0), max(1.0, math.sqrt(area / math.pi))
+        reach = float(np.max(np.hypot(outline[:, 0] - cx, outline[:, 1] - cy)))
+    (r0, c0, r1, c1), crop, (background, plateau, noise), outline, merged = found
     contrast = plateau - background
-    if not contrast > 0:
-        return None
-    level = background + 0.5 * contrast
-    seed = np.argwhere(blob & (crop >= level))
-    if len(seed) == 0:
-        return None
-    seed_rc = tuple(seed[len(seed) // 2])
-    outline = _outline(crop, level, background, seed_rc)
-    if outline is None:
-        return None
     area, cx, cy = _polygon_area_centroid(outline)
     diameter = 2.0 * math.sqrt(area / math.pi)
-    hull = cv2.convexHull(outline.astype(np.float32))
-    hull_area = float(cv2.contourArea(hull))
+    hull_area = float(cv2.contourArea(cv2.convexHull(outline.astype(np.float32))))
     solidity = area / hull_area if hull_area > 0 else 0.0
     (_, _), (side_a, side_b), _ = cv2.minAreaRect(outline.astype(np.float32))
     elongation = max(side_a, side_b) / max(min(side_a, side_b), 1e-6)
-    r25 = _filled_radius(crop, blob, background + 0.25 * contrast)
-    r75 = _filled_radius(crop, blob, background + 0.75 * contrast)
-    edge_width = r25 - r75
+    inside = np.zeros(crop.shape, dtype=np.uint8)
+    cv2.fillPoly(inside, [np.round(outline).astype(np.int32)], 1)
+    blob = inside.astype(bool)
+    edge_width = contrast / max(_edge_gradient(crop, outline), 1e-12)
     outline_xy = outline + np.array([c0, r0], dtype=np.float64)
     # The padded contour runs outside [0, size − 1] only where the frame cuts the disc.
     clipped = bool(outline_xy.min() < 0.0 or outline_xy[:, 0].max() > width - 1 or outline_xy[:, 1].max() > height - 1)
-    inside = np.zeros(crop.shape, dtype=np.uint8)
-    cv2.fillPoly(inside, [np.round(outline).astype(np.int32)], 1)
-    saturated = False
+    saturated = clipped_beyond = False
     if clipped_mask is not None:
-        clipped_pixels = int(clipped_mask[r0:r1, c0:c1][inside.astype(bool)].sum())
-        saturated = clipped_pixels > max(1.0, SATURATED_SHARE * area)
-    overlaps = bool((others & _dilate(inside.astype(bool), 2)).any())
-    overlaps = overlaps or 2 <= _deep_concavities(outline, OVERLAP_DEFECT_DEPTH * 0.5 * diameter) <= 4
-    snr = contrast / noise_sigma
+        clipped_crop = clipped_mask[r0:r1, c0:c1]
+        saturated = int(clipped_crop[blob].sum()) > max(1.0, SATURATED_SHARE * area)
+        if saturated:  # a saturated disc's edge is where the clipping stops
+            ring = cv2.dilate(inside, np.ones((5, 5), np.uint8)).astype(bool) & ~blob
+            clipped_beyond = bool(ring.any()) and clipped_crop[ring].mean() > MAX_CLIPPED_RING_SHARE
+    depth = max(OVERLAP_DEFECT_MIN_PX, OVERLAP_DEFECT_DEPTH * 0.5 * diameter)
+    merged = merged or 2 <= _deep_concavities(outline, depth) <= 4
+    snr = contrast / max(noise, min_noise)
 
     reason = None
     if diameter < min_diameter_px:
         reason = "too small"
-    elif snr < MIN_SNR:
+    elif clipped_beyond:
+        reason = "in a clipped region"
+    elif not _contrast_ok(contrast, noise, background):
         reason = "faint"
     elif edge_width > max(EDGE_WIDTH_MIN_PX, EDGE_WIDTH_MAX_REL * 0.5 * diameter) and not saturated:
         reason = "soft edge"
@@ -211,6 +288,19 @@ def measure_blob(
         edge_width_px=edge_width,
         saturated=saturated,
         clipped=clipped,
-        overlaps=overlaps,
+        overlaps=merged,
         reason=reason,
+    )
+
+
+def _open_in_window(outline: np.ndarray, shape: tuple[int, int], window, frame) -> bool:
+    """True when the outline reaches a side of the search window that is not the frame's edge."""
+    r0, c0, r1, c1 = window
+    height, width = frame
+    x, y = outline[:, 0], outline[:, 1]
+    return bool(
+        (c0 > 0 and x.min() <= 0.0)
+        or (r0 > 0 and y.min() <= 0.0)
+        or (c1 < width and x.max() >= shape[1] - 1)
+        or (r1 < height and y.max() >= shape[0] - 1)
     )

@@ -1,0 +1,207 @@
+"""The disc finder on synthetic photos made with bokehfit's exact kernels.
+
+Thresholds (stated once, asserted below):
+- recall and precision ≥ RECALL_MIN / PRECISION_MIN over isolated, unclipped discs;
+- equal-area diameter error ≤ DIAMETER_TOL_REL of the diameter or DIAMETER_TOL_PX, whichever is larger;
+- centre error ≤ CENTRE_TOL_PX.
+A found disc matches a true one when its centre lies within a quarter of the true diameter (≥ 2 px).
+Slits narrower than SLIT_MIN_WIDTH_PX (the 6- and 9-px ones, 1.6 and 2.4 px wide) need only be found:
+their 50 % outline is widened by the edge blur.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import cv2
+import numpy as np
+import pytest
+
+from bokehfit.apertures import SHAPES
+from bokehfit.discs import find_discs
+from bokehfit.errors import InputError
+from bokehfit.synthetic import SyntheticDisc, encode_srgb8, render_discs
+
+RECALL_MIN = 0.95
+PRECISION_MIN = 0.95
+DIAMETER_TOL_REL = 0.03
+DIAMETER_TOL_PX = 0.35
+CENTRE_TOL_PX = 0.35
+#: Looser after JPEG compression (8-bit quantisation, ringing at the edges).
+JPEG_DIAMETER_TOL_REL = 0.05
+JPEG_DIAMETER_TOL_PX = 0.6
+JPEG_CENTRE_TOL_PX = 0.6
+SLIT_MIN_WIDTH_PX = 3.0
+
+DIAMETERS = (6, 9, 14, 22, 35, 56, 90, 140, 200)
+SHAPE_CASES = [dict(shape="ngon", blades=9) if s == "ngon" else dict(shape=s) for s in SHAPES]
+
+
+def layout(diameters, shapes, *, seed=0, spacing_factor=1.5, width=None):
+    """Discs on a grid with room between them (no overlaps), random angles and sub-pixel centres."""
+    rng = np.random.default_rng(seed)
+    specs = list(zip(diameters, itertools.cycle(shapes)))
+    cell = int(max(d for d, _ in specs) * spacing_factor * 2.2) + 8  # the slit is 3.3 d/2 tall
+    columns = max(1, int(math.ceil(math.sqrt(len(specs)))))
+    rows = int(math.ceil(len(specs) / columns))
+    discs = []
+    for i, (diameter, shape) in enumerate(specs):
+        row, col = divmod(i, columns)
+        centre = ((col + 0.5) * cell + rng.uniform(-0.5, 0.5), (row + 0.5) * cell + rng.uniform(-0.5, 0.5))
+        discs.append(
+            SyntheticDisc(centre, diameter, angle_deg=rng.uniform(0, 360), brightness=rng.uniform(0.3, 0.9), **shape)
+        )
+    return discs, columns * cell, rows * cell
+
+
+def match(found, truth):
+    """Pairs (true disc, found disc or None), nearest centre within a quarter diameter."""
+    pairs = []
+    for t in truth:
+        best = min(
+            found,
+            key=lambda d: math.hypot(d.center_xy[0] - t.center_xy[0], d.center_xy[1] - t.center_xy[1]),
+            default=None,
+        )
+        if best is not None and math.hypot(best.center_xy[0] - t.center_xy[0], best.center_xy[1] - t.center_xy[1]) <= max(
+            2.0, t.diameter_px / 4
+        ):
+            pairs.append((t, best))
+        else:
+            pairs.append((t, None))
+    return pairs
+
+
+def score(found, truth):
+    pairs = match(found, truth)
+    matched = [(t, f) for t, f in pairs if f is not None]
+    recall = len(matched) / len(truth)
+    precision = len({id(f) for _, f in matched}) / max(len(found), 1)
+    return recall, precision, matched
+
+
+def gradient(width, height, low=0.01, high=0.08):
+    return np.linspace(low, high, width, dtype=np.float32)[None, :].repeat(height, axis=0)
+
+
+def slit_width_px(disc):
+    return disc.diameter_px * math.sqrt(math.pi) / 2 * 0.3
+
+
+def assert_accurate(matched, tol_rel, tol_px, centre_tol):
+    for t, f in matched:
+        if t.shape == "slit" and slit_width_px(t) < SLIT_MIN_WIDTH_PX:
+            continue
+        error = abs(f.diameter_px - t.diameter_px)
+        assert error <= max(tol_rel * t.diameter_px, tol_px), f"{t.shape} {t.diameter_px} px: diameter {f.diameter_px:.2f}"
+        offset = math.hypot(f.center_xy[0] - t.center_xy[0], f.center_xy[1] - t.center_xy[1])
+        assert offset <= centre_tol, f"{t.shape} {t.diameter_px} px: centre off by {offset:.2f} px"
+
+
+@pytest.mark.parametrize("case", SHAPE_CASES, ids=[c["shape"] for c in SHAPE_CASES])
+def test_every_shape_and_size_is_found_and_measured(case):
+    truth, width, height = layout(DIAMETERS, [case], seed=len(case["shape"]))
+    image = render_discs(width, height, truth, background=gradient(width, height), noise_sigma=0.003, seed=1)
+    search = find_discs(image)
+    recall, precision, matched = score(search.discs, truth)
+    assert recall >= RECALL_MIN and precision >= PRECISION_MIN, (recall, precision, search.rejected)
+    assert_accurate(matched, DIAMETER_TOL_REL, DIAMETER_TOL_PX, CENTRE_TOL_PX)
+    for t, f in matched:
+        assert f.resolvable == (f.diameter_px >= 8.0)
+        assert not (f.saturated or f.clipped or f.overlaps), f"{t.shape} {t.diameter_px}: flags"
+
+
+def jpeg_round_trip(linear, quality):
+    ok, data = cv2.imencode(".jpg", encode_srgb8(linear), [cv2.IMWRITE_JPEG_QUALITY, quality])
+    decoded = cv2.imdecode(data, cv2.IMREAD_GRAYSCALE)
+    import colour
+
+    lut = colour.cctf_decoding(np.arange(256) / 255.0, function="sRGB").astype(np.float32)
+    return lut[decoded], decoded == 255
+
+
+@pytest.mark.parametrize("quality", [70, 95])
+def test_jpeg_compressed_discs(quality):
+    shapes = [dict(shape="hexagon"), dict(shape="circle"), dict(shape="star"), dict(shape="square")]
+    truth, width, height = layout((10, 18, 30, 50, 80, 120, 12, 24, 40, 64, 100, 160), shapes, seed=3)
+    linear = render_discs(width, height, truth, background=gradient(width, height, 0.02, 0.06), noise_sigma=0.002)
+    luminance, clipped = jpeg_round_trip(linear, quality)
+    search = find_discs(luminance, clipped)
+    recall, precision, matched = score(search.discs, truth)
+    assert recall >= RECALL_MIN and precision >= PRECISION_MIN, (recall, precision, search.rejected)
+    assert_accurate(matched, JPEG_DIAMETER_TOL_REL, JPEG_DIAMETER_TOL_PX, JPEG_CENTRE_TOL_PX)
+
+
+def test_saturated_discs_are_found_and_flagged():
+    truth = [
+        SyntheticDisc((60.3, 60.7), 40, "hexagon", brightness=3.0),
+        SyntheticDisc((160.2, 60.1), 40, "hexagon", brightness=0.5),
+    ]
+    image = render_discs(220, 120, truth)
+    search = find_discs(image, image >= 1.0)
+    pairs = dict((t.brightness, f) for t, f in match(search.discs, truth))
+    assert pairs[3.0] is not None and pairs[3.0].saturated
+    assert pairs[0.5] is not None and not pairs[0.5].saturated
+    assert abs(pairs[3.0].diameter_px - 40) < 2.5  # a clipped plateau still has its 50 % edge near the true one
+
+
+def test_disc_clipped_by_frame_is_flagged():
+    truth = [SyntheticDisc((8.0, 70.0), 50, "circle"), SyntheticDisc((120.0, 70.0), 50, "circle")]
+    search = find_discs(render_discs(200, 140, truth, noise_sigma=0.002))
+    pairs = dict((t.center_xy[0], f) for t, f in match(search.discs, truth))
+    assert pairs[8.0] is not None and pairs[8.0].clipped and not pairs[8.0].usable
+    assert pairs[120.0] is not None and not pairs[120.0].clipped and pairs[120.0].usable
+
+
+def test_overlapping_discs_are_flagged():
+    truth = [SyntheticDisc((80.0, 80.0), 60, "circle"), SyntheticDisc((125.0, 82.0), 60, "circle", brightness=0.6)]
+    search = find_discs(render_discs(220, 170, truth, noise_sigma=0.002))
+    assert search.discs and all(d.overlaps for d in search.discs)
+    assert not any(d.usable for d in search.discs)
+
+
+def test_star_is_not_taken_for_overlapping_discs():
+    search = find_discs(render_discs(160, 160, [SyntheticDisc((80.2, 79.6), 90, "star", angle_deg=7)]))
+    assert len(search) == 1 and not search.discs[0].overlaps
+
+
+def gaussian_blob(width, height, centre, sigma, peak):
+    rows, cols = np.indices((height, width), dtype=np.float32)
+    return peak * np.exp(-((cols - centre[0]) ** 2 + (rows - centre[1]) ** 2) / (2 * sigma**2))
+
+
+def test_non_discs_are_rejected_with_reasons():
+    image = np.full((240, 320), 0.03, dtype=np.float32)
+    image += gaussian_blob(320, 240, (60, 60), 1.2, 0.9)  # in-focus glint: smaller than any band
+    image += gaussian_blob(320, 240, (160, 60), 14.0, 0.6)  # smooth blob: soft edge
+    image[150:153, 20:300] += 0.7  # a bright in-focus line: elongated
+    image += np.random.default_rng(0).normal(0, 0.002, image.shape).astype(np.float32)
+    search = find_discs(image)
+    assert not search, [d.center_xy for d in search.discs]
+    assert {"soft edge", "elongated"} <= set(search.rejected), search.rejected
+    assert "no disc among" in search.reason
+
+
+@pytest.mark.parametrize("level", [0.0, 1.0])
+def test_flat_images_have_no_discs(level):
+    search = find_discs(np.full((64, 64), level, dtype=np.float32))
+    assert not search and search.reason == "no highlight stands out from the background"
+
+
+def test_faint_noise_only_image_has_no_discs():
+    noise = np.random.default_rng(5).normal(0.05, 0.01, (300, 300)).astype(np.float32)
+    assert not find_discs(noise)
+
+
+def test_nan_is_refused():
+    image = np.zeros((32, 32), dtype=np.float32)
+    image[3, 4] = np.nan
+    with pytest.raises(InputError, match="NaN"):
+        find_discs(image)
+
+
+def test_max_discs_keeps_the_largest():
+    truth, width, height = layout((10, 20, 30, 40), [dict(shape="circle")], seed=2)
+    search = find_discs(render_discs(width, height, truth, noise_sigma=0.002), max_discs=2)
+    assert [round(d.diameter_px) for d in search.discs] == [40, 30]
