@@ -7,6 +7,7 @@ never leaves one behind.
 
 from __future__ import annotations
 
+import json
 import os
 import tempfile
 from pathlib import Path
@@ -16,7 +17,15 @@ import numpy as np
 
 from bokehfit.errors import InputError
 
-__all__ = ["check_output_path", "write_atomic", "write_bytes_atomic", "write_kernel_image", "KERNEL_FORMATS"]
+__all__ = [
+    "check_output_path",
+    "write_atomic",
+    "write_bytes_atomic",
+    "write_json",
+    "write_png",
+    "write_kernel_image",
+    "KERNEL_FORMATS",
+]
 
 #: Kernel file formats by suffix.
 KERNEL_FORMATS = (".npy", ".png", ".exr")
@@ -55,20 +64,30 @@ def write_bytes_atomic(path: Path, data: bytes) -> None:
     write_atomic(path, lambda tmp: tmp.write_bytes(data))
 
 
+def write_json(path: Path, data: dict) -> None:
+    """Write ``data`` as indented JSON, atomically."""
+    write_bytes_atomic(path, (json.dumps(data, indent=1, allow_nan=False) + "\n").encode("utf-8"))
+
+
+def write_png(path: Path, image: np.ndarray) -> None:
+    """Write an 8- or 16-bit image (grey, or BGR as OpenCV orders it) as PNG, atomically."""
+    import cv2
+
+    ok, encoded = cv2.imencode(".png", image)
+    if not ok:
+        raise OSError(f"could not encode {path} as PNG")
+    write_bytes_atomic(path, encoded.tobytes())
+
+
 def write_kernel_image(path: Path, kernel: np.ndarray) -> None:
     """Save a kernel: ``.npy`` raw float32, ``.png`` 16-bit scaled to its peak, ``.exr`` float32."""
     suffix = path.suffix.lower()
     if suffix == ".npy":
         write_atomic(path, lambda tmp: np.save(tmp, kernel.astype(np.float32)))
     elif suffix == ".png":
-        import cv2
-
         peak = float(kernel.max())
         scaled = np.round(kernel / peak * 65535.0) if peak > 0 else np.zeros_like(kernel)
-        ok, encoded = cv2.imencode(".png", scaled.astype(np.uint16))
-        if not ok:
-            raise OSError(f"could not encode {path} as PNG")
-        write_bytes_atomic(path, encoded.tobytes())
+        write_png(path, scaled.astype(np.uint16))
     elif suffix == ".exr":
         import OpenEXR
 

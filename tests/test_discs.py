@@ -205,3 +205,25 @@ def test_max_discs_keeps_the_largest():
     truth, width, height = layout((10, 20, 30, 40), [dict(shape="circle")], seed=2)
     search = find_discs(render_discs(width, height, truth, noise_sigma=0.002), max_discs=2)
     assert [round(d.diameter_px) for d in search.discs] == [40, 30]
+
+
+def test_discs_survive_a_raw_round_trip(tmp_path):
+    """A rendered bokeh image mosaiced into a Bayer DNG, read through rawpy, gives the same discs."""
+    from photo_factory import write_dng
+
+    from bokehfit.io import load_photo
+
+    truth = [
+        SyntheticDisc((70.4, 66.2), 48, "hexagon", angle_deg=10, brightness=0.5),
+        SyntheticDisc((190.7, 80.3), 36, "circle", brightness=0.4),
+        SyntheticDisc((130.2, 170.9), 56, "star", angle_deg=30, brightness=0.45),
+    ]
+    linear = render_discs(260, 240, truth, background=0.05, noise_sigma=0.002, seed=9)
+    black, white = 256, 4095
+    mosaic = np.round(black + linear * (white - black)).astype(np.uint16)  # grey scene: R = G = B
+    photo = load_photo(write_dng(tmp_path / "bokeh.dng", mosaic, white=white, black=black))
+    assert photo.raw and photo.luminance.shape == (240, 260)
+    search = find_discs(photo.luminance, photo.clipped)
+    recall, precision, matched = score(search.discs, truth)
+    assert recall == 1.0 and precision == 1.0, (recall, precision, search.rejected)
+    assert_accurate(matched, DIAMETER_TOL_REL, 0.5, 0.5)

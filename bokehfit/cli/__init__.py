@@ -1,6 +1,8 @@
 """The ``bokehfit`` command: ``main(argv)`` does the work, ``entry_point`` maps errors to exit codes.
 
-Exit codes: 0 success, 1 no acceptable result, 2 usage or input error. Every
+Exit codes: 0 success, 1 no acceptable result, 2 usage or input error, 3 an
+internal error (a bug: the message asks for a report; ``BOKEHFIT_DEBUG=1``
+shows the traceback). Every
 subcommand is a module of this package with ``add_parser(subparsers)`` and
 ``run(args) -> result``; adding one is one entry in ``SUBCOMMANDS``.
 """
@@ -8,16 +10,17 @@ subcommand is a module of this package with ``add_parser(subparsers)`` and
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import warnings
 
 from bokehfit import __version__
-from bokehfit.cli import kernel
+from bokehfit.cli import discs, kernel
 from bokehfit.errors import BokehfitError
 
 __all__ = ["main", "entry_point", "build_parser"]
 
-SUBCOMMANDS = (kernel,)
+SUBCOMMANDS = (discs, kernel)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -62,3 +65,12 @@ def entry_point() -> None:
     except OSError as error:
         print(f"bokehfit: error: {error.strerror or error} ({error.filename or 'I/O'})", file=sys.stderr)
         sys.exit(2)
+    except Exception as error:  # a bug: one line for people, the traceback on request
+        if os.environ.get("BOKEHFIT_DEBUG"):
+            raise
+        print(
+            f"bokehfit: internal error: {type(error).__name__}: {error} "
+            "(please report it; BOKEHFIT_DEBUG=1 shows the traceback)",
+            file=sys.stderr,
+        )
+        sys.exit(3)
