@@ -2,7 +2,7 @@
 
 Usage::
 
-    python benchmarks/discs_accuracy.py [--quick] [--replicates 3] [--json out.json]
+    python benchmarks/discs_accuracy.py [--quick] [--replicates N] [--json out.json]
     BOKEHFIT_REFERENCE_DIR=/path/to/jpegs python benchmarks/discs_accuracy.py
 
 1. Synthetic accuracy. Every aperture of ``bokehfit.apertures.SHAPES`` (``ngon``
@@ -26,15 +26,15 @@ Usage::
    the "6–9 no slit" row leaves them out.
 2. Time per megapixel (skipped by ``--quick``). A 6000×4000 synthetic JPEG
    (quality 90) with 50 discs of 10–200 px, mixed shapes, on a gradient with
-   noise; ``load_photo`` and ``find_discs`` are timed in a fresh process, whose
-   peak RSS (``resource.getrusage(...).ru_maxrss``, KiB on Linux) is read before
-   loading, after loading and after the search, so that rendering the test
-   image does not count.
+   noise; ``load_photo`` and ``find_discs`` are timed in a fresh process (from a
+   forkserver started before any image was made: ``ru_maxrss`` survives fork
+   and exec on Linux), whose peak RSS (``resource.getrusage(...).ru_maxrss``,
+   KiB on Linux) is read before loading, after loading and after the search.
 3. Real photos, when the environment variable ``BOKEHFIT_REFERENCE_DIR`` names a
    folder: every JPEG in it (sorted) is loaded and searched; the table gives
    discs found, usable, saturated, overlapping, the median diameter and times.
 
-``--quick`` uses circle, hexagon and star at 9, 35 and 140 px
+``--quick`` uses circle, hexagon and star at 9, 35 and 140 px, 3 replicates instead of 8,
 and skips the 24-MP timing. The script prints figures; it asserts nothing.
 All timings come from one process on one machine, single run each.
 """
@@ -43,14 +43,14 @@ from __future__ import annotations
 
 import argparse
 import concurrent.futures
+import itertools
 import json
 import math
 import multiprocessing
+import multiprocessing.forkserver
 import os
 import platform
 import resource
-import statistics
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -132,7 +132,7 @@ def match(found, truth):
 
 def band_of(diameter: float) -> str:
     """The band a diameter falls in, bands split at the geometric means of neighbouring limits."""
-    for (low, high), (next_low, _) in zip(BANDS, BANDS[1:]):
+    for (low, high), (next_low, _) in itertools.pairwise(BANDS):
         if diameter < math.sqrt(high * next_low):
             return f"{low}–{high}"
     return f"{BANDS[-1][0]}–{BANDS[-1][1]}"
@@ -179,7 +179,8 @@ def summarise(records, false_positives):
 
 def synthetic(shapes, diameters, replicates):
     conditions = ["linear"] + [f"jpeg q{q}" for q in QUALITIES]
-    records, unmatched, stats = [], [], {c: dict(load_s=0.0, detect_s=0.0, megapixels=0.0) for c in conditions}
+    records, unmatched = [], []
+    stats = {c: dict(load_s=0.0, detect_s=0.0, megapixels=0.0, candidates=0, beyond_limit=0) for c in conditions}
     with tempfile.TemporaryDirectory(prefix="bokehfit_discs_bench_") as tmp:
         for replicate in range(replicates):
             truth, width, height = shelf_layout(shapes, diameters, seed=100 + replicate)
@@ -192,6 +193,8 @@ def synthetic(shapes, diameters, replicates):
                 stats[condition]["load_s"] += load_s
                 stats[condition]["detect_s"] += search.time_s
                 stats[condition]["megapixels"] += width * height / 1e6
+                stats[condition]["candidates"] += search.candidates
+                stats[condition]["beyond_limit"] += search.rejected.get("beyond the candidate limit", 0)
                 pairs = match(search.discs, truth)
                 used = set()
                 for t, f in pairs:
@@ -205,7 +208,8 @@ def synthetic(shapes, diameters, replicates):
                             found_diameter_px=float(f.diameter_px),
                             rel_error=abs(f.diameter_px - t.diameter_px) / t.diameter_px,
                             centre_error_px=math.dist(f.center_xy, t.center_xy),
-                            usable=f.usable, saturated=f.saturated, clipped=f.clipped, overlaps=f.overlaps,
+                            usable=bool(f.usable), saturated=bool(f.saturated), clipped=bool(f.clipped),
+                            overlaps=bool(f.overlaps),
                         )
                     records.append(record)
                 for f in search.discs:
@@ -231,6 +235,19 @@ def synthetic(shapes, diameters, replicates):
             chosen = [r for r in mine if r["shape"] == shape]
             shape_rows.append(dict(condition=condition, shape=shape, **summarise(chosen, 0)))
     return band_rows, shape_rows, records, unmatched, stats
+
+
+def finite_or_none(value):
+    """JSON-safe copy: NaN → None, numpy scalars → Python numbers."""
+    if isinstance(value, dict):
+        return {k: finite_or_none(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [finite_or_none(v) for v in value]
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
 
 
 def fmt(value, spec):
@@ -289,6 +306,7 @@ def _timed_load_and_search(path: str) -> dict:
     after_detect = peak()
     return dict(
         width=photo.width, height=photo.height, load_s=load_s, detect_s=search.time_s, candidates=search.candidates,
+        rejected=dict(search.rejected),
         peak_rss_kib_before=before, peak_rss_kib_after_load=after_load, peak_rss_kib_after_detect=after_detect,
         discs=[dict(center_xy=list(map(float, d.center_xy)), diameter_px=float(d.diameter_px), usable=d.usable)
                for d in search.discs],
@@ -306,7 +324,9 @@ def timing_24mp():
     with tempfile.TemporaryDirectory(prefix="bokehfit_discs_bench_") as tmp:
         path = Path(tmp) / "timing_24mp.jpg"
         path.write_bytes(data)
-        context = multiprocessing.get_context("spawn")
+        # A forkserver started before anything large was allocated: ru_maxrss survives fork and exec on
+        # Linux, so a child forked or spawned from this process would report this process's peak.
+        context = multiprocessing.get_context("forkserver")
         with concurrent.futures.ProcessPoolExecutor(max_workers=1, mp_context=context) as pool:
             result = pool.submit(_timed_load_and_search, str(path)).result()
     megapixels = result["width"] * result["height"] / 1e6
@@ -348,13 +368,15 @@ def real_photos(folder: Path):
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="3 shapes × 3 diameters, no 24-MP timing")
-    parser.add_argument("--replicates", type=int, help="synthetic images per condition (default 3)")
+    parser.add_argument("--replicates", type=int, help="synthetic images per condition (default 8, --quick 3)")
     parser.add_argument("--json", help="write all rows as JSON here")
     args = parser.parse_args()
     shapes = QUICK_SHAPES if args.quick else tuple(SHAPES)
     diameters = QUICK_DIAMETERS if args.quick else DIAMETERS
-    replicates = args.replicates or 3
+    replicates = args.replicates or (3 if args.quick else 8)
     total_start = time.perf_counter()
+    if not args.quick:
+        multiprocessing.forkserver.ensure_running()  # before the big allocations (see timing_24mp)
 
     print(f"bokehfit disc finder benchmark{' (--quick)' if args.quick else ''}")
     print(f"  {platform.python_implementation()} {platform.python_version()}, numpy {np.__version__}, "
@@ -369,7 +391,8 @@ def main() -> None:
           f"({synthetic_s:.1f} s)")
     for condition, s in stats.items():
         print(f"  {condition:<9}{s['megapixels']:.2f} MP searched, load {s['load_s']:.2f} s, "
-              f"detect {s['detect_s']:.2f} s ({s['detect_s'] / s['megapixels']:.3f} s/MP)")
+              f"detect {s['detect_s']:.2f} s ({s['detect_s'] / s['megapixels']:.3f} s/MP), "
+              f"{s['candidates']} candidates measured, {s['beyond_limit']} beyond the limit")
     print()
     print_band_table(band_rows)
     print()
@@ -387,7 +410,8 @@ def main() -> None:
               f"(made in {t['make_s']:.1f} s), fresh process")
         print(f"  load_s {t['load_s']:.2f}  detect_s {t['detect_s']:.2f}  detect {t['detect_s_per_mp']:.3f} s/MP  "
               f"load {t['load_s_per_mp']:.3f} s/MP")
-        print(f"  candidates {t['candidates']}, discs found {t['discs_found']}, matched {t['matched']}/{t['true_discs']}")
+        print(f"  discs found {t['discs_found']}, matched {t['matched']}/{t['true_discs']}; candidates measured "
+              f"{t['candidates']}; rejected: " + ", ".join(f"{n} {why}" for why, n in t["rejected"].items()))
         print(f"  peak RSS (ru_maxrss): before load {t['peak_rss_kib_before'] / 1024:.0f} MiB, "
               f"after load {t['peak_rss_kib_after_load'] / 1024:.0f} MiB, "
               f"after detect {t['peak_rss_kib_after_detect'] / 1024:.0f} MiB")
@@ -402,10 +426,10 @@ def main() -> None:
     else:
         real = real_photos(Path(folder))
         print(f"3. Real photos in {folder}")
-        print(f"{'file':<52}{'size':>11}{'found':>7}{'usable':>8}{'satur':>7}{'overlap':>9}{'med d px':>10}"
+        print(f"{'file':<52}{'size':>11}{'cands':>6}{'found':>7}{'usable':>8}{'satur':>7}{'overlap':>9}{'med d px':>10}"
               f"{'load_s':>8}{'detect_s':>10}")
         for r in real:
-            print(f"{r['file'][:51]:<52}{r['width']:>5}×{r['height']:<5}{r['found']:>7}{r['usable']:>8}{r['saturated']:>7}"
+            print(f"{r['file'][:51]:<52}{r['width']:>5}×{r['height']:<5}{r['candidates']:>6}{r['found']:>7}{r['usable']:>8}{r['saturated']:>7}"
                   f"{r['overlapping']:>9}{fmt(r['median_diameter_px'], '.1f'):>10}{r['load_s']:>8.2f}{r['detect_s']:>10.2f}")
 
     total_s = time.perf_counter() - total_start
@@ -413,13 +437,13 @@ def main() -> None:
     print(f"total {total_s:.1f} s")
     if args.json:
         with open(args.json, "w") as f:
-            json.dump(dict(
+            json.dump(finite_or_none(dict(
                 quick=args.quick, shapes=list(shapes), diameters=list(diameters), replicates=replicates,
                 noise_sigma=NOISE_SIGMA, edge_blur_px=EDGE_BLUR_PX, gradient=list(GRADIENT), qualities=list(QUALITIES),
                 synthetic_bands=band_rows, synthetic_shapes=shape_rows, synthetic_stats=stats,
                 synthetic_discs=records, synthetic_unmatched=unmatched, timing_24mp=timing, real_photos=real,
                 total_s=total_s,
-            ), f, indent=1, default=float)
+            )), f, indent=1)
 
 
 if __name__ == "__main__":
