@@ -146,7 +146,7 @@ class Aperture:
         if self.spec.takes_aspect:
             name += f"(aspect {self.aspect:g})"
         angle = self.canonical_angle_deg
-        return name if angle is None else f"{name} {angle:g}°"
+        return name if angle is None else f"{name} {round(angle, 2):g}°"
 
 
 def _fan_radii(aperture: Aperture) -> np.ndarray:

@@ -15,12 +15,12 @@ import sys
 import warnings
 
 from bokehfit import __version__
-from bokehfit.cli import discs, kernel
+from bokehfit.cli import compare, discs, kernel, similarity
 from bokehfit.errors import BokehfitError
 
 __all__ = ["main", "entry_point", "build_parser"]
 
-SUBCOMMANDS = (discs, kernel)
+SUBCOMMANDS = (compare, discs, kernel, similarity)
 
 
 class _Parser(argparse.ArgumentParser):

@@ -81,7 +81,7 @@ class CandidateModel:
             "blades": self.family.blades if self.family.shape == "ngon" else self.family.aperture().blades,
             "name": self.family.name,
             "angle_deg": None if self.angle_deg is None else round(self.angle_deg, 3),
-            "score": round(-self.delta_bic, 2),
+            "score": round(-self.delta_bic, 2) + 0.0,
             "delta_bic": round(self.delta_bic, 2),
             "bic": round(self.bic, 2),
             "screen_rms": round(self.screen_rms, 5),

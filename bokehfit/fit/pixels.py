@@ -30,7 +30,7 @@ from bokehfit.discs import Disc
 from bokehfit.fit.families import Family
 from bokehfit.kernels.exact import coverage
 
-__all__ = ["PixelFit", "disc_profile", "fit_disc_pixels", "render_disc_model", "MAX_FIT_SIDE"]
+__all__ = ["PixelFit", "disc_profile", "fit_disc_pixels", "model_window", "render_disc_model", "MAX_FIT_SIDE"]
 
 #: Largest crop side fitted at full resolution; larger discs are reduced first.
 MAX_FIT_SIDE = 36
@@ -191,3 +191,14 @@ def fit_disc_pixels(
         evaluations=int(result.nfev),
         success=bool(result.success),
     )
+
+
+def model_window(fit: PixelFit, left: int, top: int, size: int) -> np.ndarray:
+    """The fitted model of a disc on a full-resolution window (size × size, top-left at (left, top))."""
+    params = np.array(
+        [fit.center_xy[0] - left, fit.center_xy[1] - top, fit.diameter_px, fit.blur_px]
+        + ([fit.angle_deg] if fit.family.shape != "circle" else [])
+        + ([fit.aspect] if fit.family.shape == "slit" else [])
+    )
+    profile = disc_profile(fit.family, params, size)
+    return (fit.background + (fit.plateau - fit.background) * profile).astype(np.float32)
