@@ -23,11 +23,16 @@ from bokehfit.kernels import Kernel, compute_kernel
 from bokehfit.metrics import METRICS, angle_error, compare_outlines
 from bokehfit.optics import LENS_MODELS, SIZE_CONVENTIONS, circumscribed_fstop, fstop_from_coc, pixel_pitch_mm
 
-__all__ = ["SCHEMA_VERSION", "Geometry", "FStop", "Comparison", "compare_photo", "resolve_geometry", "estimate_fstop"]
+__all__ = ["SCHEMA_VERSION", "Geometry", "FStop", "Comparison", "compare_photo", "estimate_fstop", "judge", "resolve_geometry"]
 
 SCHEMA_VERSION = 1
 #: Samples of the matched kernel rendered on the GPU.
 KERNEL_SAMPLES = 2**22
+#: A fit is acceptable when the discs match the kernel at least this well (median IoU) ...
+MIN_ACCEPTABLE_IOU = 0.6
+#: ... and sure when, besides a clear BIC margin, they match this well with at least MIN_SURE_DISCS discs.
+MIN_SURE_IOU = 0.85
+MIN_SURE_DISCS = 3
 
 
 @dataclass(frozen=True)
@@ -75,6 +80,12 @@ class Comparison:
     metrics: dict[str, float | None] = field(default_factory=dict)
     timing_s: dict[str, float] = field(default_factory=dict)
     device: dict[str, str | None] = field(default_factory=dict)
+    doubts: list[str] = field(default_factory=list)  #: why the fit is unsure (empty when sure)
+    rejection: str | None = None  #: why no acceptable fit was found (None when there is one)
+
+    @property
+    def acceptable(self) -> bool:
+        return bool(self.fit) and self.rejection is None
 
     def aperture_json(self) -> dict:
         fit = self.fit
@@ -98,7 +109,8 @@ class Comparison:
             "lens_model": self.fstop.lens_model,
             "focus_side": fit.focus_side,
             "angle_note": _angle_note(fit),
-            "sure": fit.sure,
+            "sure": not self.doubts,
+            "doubts": self.doubts,
             "message": fit.message,
             "candidates": [c.to_json() for c in fit.candidates],
         }
@@ -290,4 +302,26 @@ def compare_photo(
             metrics[name] = float(np.median([values[name] for values in per_disc.values()]))
         timing["metrics"] = time.perf_counter() - started
     timing["total"] = time.perf_counter() - start
-    return Comparison(photo, search, fit, kernel, geometry, fstop, per_disc, metrics, timing, device)
+    comparison = Comparison(photo, search, fit, kernel, geometry, fstop, per_disc, metrics, timing, device)
+    if fit:
+        comparison.doubts, comparison.rejection = judge(fit, metrics)
+    return comparison
+
+
+def judge(fit: ApertureFit, metrics: dict[str, float | None]) -> tuple[list[str], str | None]:
+    """Doubts about a fit, and the reason to reject it, from the evidence (stated thresholds)."""
+    doubts = []
+    if not fit.sure:
+        doubts.append(f"the runner-up ({fit.candidates[1].family.name}) fits almost as well")
+    if len(fit.disc_fits) < MIN_SURE_DISCS:
+        doubts.append(f"only {len(fit.disc_fits)} disc(s) could be fitted")
+    iou = metrics.get("iou")
+    if iou is not None and iou < MIN_SURE_IOU:
+        doubts.append(f"the discs match the kernel loosely (median IoU {iou:.2f} < {MIN_SURE_IOU})")
+    rejection = None
+    if iou is not None and iou < MIN_ACCEPTABLE_IOU:
+        rejection = (
+            f"no acceptable fit: the discs match the best model ({fit.family.name}) poorly "
+            f"(median IoU {iou:.2f} < {MIN_ACCEPTABLE_IOU})"
+        )
+    return doubts, rejection

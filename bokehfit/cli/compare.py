@@ -30,8 +30,8 @@ def add_parser(subparsers) -> None:
         "kernel on the GPU and report how well shape and kernel match.",
     )
     parser.add_argument("photo", help="JPEG, PNG, TIFF or camera raw file")
-    parser.add_argument("--json", metavar="OUT.json", help="write the result as JSON (schema_version 1)")
-    parser.add_argument("--out-dir", metavar="DIR", help="folder for report.html (default: next to --json, else none)")
+    parser.add_argument("--json", metavar="OUT.json", help="write the result as JSON (schema_version 1); creates its folder")
+    parser.add_argument("--out-dir", metavar="DIR", help="folder for report.html, created if missing (default: the JSON's folder)")
     parser.add_argument("--no-html", action="store_true", help="write no HTML report")
     parser.add_argument("--shapes", help="comma-separated shapes to try (default: all), e.g. circle,hexagon,ngon(9)")
     parser.add_argument("--focus-side", choices=FOCUS_SIDES, default="unknown", help="lights behind (far) or before (near) the focus plane")
@@ -55,8 +55,9 @@ def summary(comparison: Comparison) -> str:
         return "\n".join(lines + [f"no aperture fitted: {fit.message}"])
     aperture = comparison.aperture_json()
     angle = "" if aperture["angle_deg"] is None else f", angle {aperture['angle_deg']:.2f}° ± {aperture['angle_uncertainty_deg']:.2f}°"
-    lines.append(f"aperture: {fit.aperture.describe()}{angle}, disc {aperture['diameter_px']:.2f} px"
-                 + ("" if fit.sure else "  (unsure: the runner-up fits almost as well)"))
+    lines.append(f"aperture: {fit.aperture.describe()}{angle}, disc {aperture['diameter_px']:.2f} px")
+    if comparison.doubts:
+        lines.append("unsure: " + "; ".join(comparison.doubts))
     if aperture["fstop"] is None:
         lines.append(f"f-stop: unknown: {aperture['fstop_reason']}")
     else:
@@ -101,14 +102,26 @@ class _Progress:
             self.bar.close()
 
 
+def _make_folder(folder: Path) -> None:
+    """Create an output folder (and its parents) if it is missing."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise InputError(f"cannot create the output folder {str(folder)!r}: {error.strerror}") from None
+
+
 def run(args: argparse.Namespace) -> Comparison:
-    json_path = check_output_path(args.json, (".json",), inputs=[args.photo]) if args.json else None
+    if not Path(args.photo).is_file():
+        raise InputError(f"{args.photo} does not exist or is not a file")
+    json_path = None
+    if args.json:
+        _make_folder(Path(args.json).parent)
+        json_path = check_output_path(args.json, (".json",), inputs=[args.photo])
     html_path = None
     if not args.no_html:
         folder = Path(args.out_dir) if args.out_dir else (json_path.parent if json_path else None)
-        if args.out_dir and not folder.is_dir():
-            raise InputError(f"--out-dir {str(folder)!r} is not a folder")
         if folder is not None:
+            _make_folder(folder)
             html_path = check_output_path(folder / "report.html", (".html",), inputs=[args.photo])
     shapes = [s.strip() for s in args.shapes.split(",") if s.strip()] if args.shapes else None
     progress = _Progress()
@@ -135,6 +148,8 @@ def run(args: argparse.Namespace) -> Comparison:
         raise NoResultError(f"no bokeh disc found in {comparison.photo.path.name}: {comparison.search.reason}")
     if not comparison.fit:
         raise NoResultError(comparison.fit.message)
+    if comparison.rejection:
+        raise NoResultError(comparison.rejection)
     if json_path:
         write_json(json_path, comparison.to_json(command_line))
         print(f"wrote {json_path}")

@@ -254,7 +254,10 @@ def fit_aperture(
     best = winner_model
     best_fits = [item.fits[best.family.name] for item in disc_fits]
     diameters = np.array([f.diameter_px for f in best_fits])
-    spread = 1.4826 * float(np.median(np.abs(diameters - np.median(diameters)))) if len(diameters) > 1 else 0.0
+    # The median's uncertainty: the spread between discs (over √n) with each fit's own.
+    spread = 1.4826 * float(np.median(np.abs(diameters - np.median(diameters)))) / math.sqrt(len(diameters))
+    own = float(np.median([f.uncertainty.get("diameter_px", 0.0) for f in best_fits]))
+    spread = math.hypot(spread, own if math.isfinite(own) else 0.0)
     aspect = float(np.median([f.aspect for f in best_fits])) if best.family.shape == "slit" else None
     seen = best.angle_deg if best.angle_deg is not None else 0.0
     aperture_angle = seen + 180.0 if focus_side == "near" else seen

@@ -122,7 +122,7 @@ def build_html(comparison: Comparison, command_line: str) -> str:
         fstop = "f-stop unknown: " + aperture["fstop_reason"] if aperture["fstop"] is None else (
             f"f/{aperture['fstop']:.2f} ± {aperture['fstop_uncertainty']:.2f} ({aperture['size_convention']}, {aperture['lens_model']} lens)"
         )
-        sure = "" if fit.sure else ' <span class="unsure">(unsure: the runner-up fits almost as well)</span>'
+        sure = "".join(f'<br><span class="unsure">unsure: {html.escape(d)}</span>' for d in comparison.doubts)
         parts.append(f'<p class="summary"><b>{html.escape(fit.aperture.describe())}</b>{sure}<br>'
                      f"{html.escape(fit.message)}<br>{html.escape(fstop)}</p>")
         if aperture["angle_note"]:
