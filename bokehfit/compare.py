@@ -33,6 +33,9 @@ MIN_ACCEPTABLE_IOU = 0.6
 #: ... and sure when, besides a clear BIC margin, they match this well with at least MIN_SURE_DISCS discs.
 MIN_SURE_IOU = 0.85
 MIN_SURE_DISCS = 3
+#: The kernel is drawn at the fitted angle, so each disc's best alignment with
+#: it is searched within this many degrees.
+ALIGNMENT_SEARCH_DEG = 10.0
 
 
 @dataclass(frozen=True)
@@ -221,7 +224,7 @@ def disc_metrics(comparison_fit: ApertureFit, kernel_outline: np.ndarray) -> dic
     symmetry = comparison_fit.aperture.symmetry_deg
     seen = comparison_fit.candidates[0].angle_deg
     for item in comparison_fit.disc_fits:
-        values = compare_outlines(item.disc.outline_xy, kernel_outline)
+        values = compare_outlines(item.disc.outline_xy, kernel_outline, rotation_within_deg=ALIGNMENT_SEARCH_DEG)
         fitted = item.fits[comparison_fit.family.name]
         if symmetry is not None and fitted.angle_deg is not None and seen is not None:
             values["angle_error_deg"] = angle_error(fitted.angle_deg, seen, symmetry)

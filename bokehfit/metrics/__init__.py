@@ -25,7 +25,7 @@ Examples
 >>> hexagon = aperture_outline(make_aperture("hexagon", 20))
 >>> circle = aperture_outline(make_aperture("circle"))
 >>> round(compare_outlines(hexagon, circle)["iou"], 3)
-0.966
+0.928
 """
 
 from __future__ import annotations
@@ -44,12 +44,14 @@ from bokehfit.errors import InputError, check_finite, check_positive
 from bokehfit.metrics.efd import efd_aligned_distance, efd_coefficients, normalise_efd
 from bokehfit.metrics.outlines import (
     DEFAULT_POINTS,
+    DistanceToOutline,
     aperture_outline,
     densify,
+    following,
+    intersection_area,
     normalise,
-    rasterise,
     rotate,
-    segment_distances,
+    signed_area,
 )
 
 __all__ = [
@@ -64,21 +66,19 @@ __all__ = [
     "hu_distance",
     "iou",
     "normalise",
-    "IOU_RESOLUTION",
     "DEFAULT_HARMONICS",
 ]
 
-#: Pixels along the longer side of the grid on which the final IoU is counted.
-#: Pixel centres are tested exactly (no edge bias), so the error is the
-#: rounding noise of the boundary pixels: against shapely's exact polygon IoU
-#: it stays below 2e-4 on the test suite's shapes (tests assert 2e-3).
-IOU_RESOLUTION = 1024
-#: Grid of the coarse rotation search (pixels a side) and its angle step: the
-#: IoU of two polygons falls off linearly from an alignment, ~5e-3 per degree
-#: for a hexagon, well above this grid's noise of ~1e-3.
-COARSE_RESOLUTION = 256
+#: Scanlines, outline simplification (Douglas–Peucker tolerance, in units of
+#: the unit-area outline) and angle step of the coarse rotation
+#: search. The IoU of two polygons falls off linearly from an alignment (~5e-3
+#: per degree for a hexagon); the simplified outlines' IoU errs by at most
+#: about perimeter × tolerance ≈ 1e-3, so the coarse maxima land within a step
+#: of the true ones and the refinement, on the full outlines, finds them.
+COARSE_LINES = 128
+COARSE_SIMPLIFY = 3e-4
 COARSE_STEP_DEG = 1.0
-#: Local maxima of the coarse search refined at full resolution, and the
+#: Local maxima of the coarse search refined with the exact IoU, and the
 #: refinement's tolerance (bounded Brent/golden-section search over ±1.5 steps).
 REFINED_PEAKS = 3
 REFINE_TOL_DEG = 0.01
@@ -108,27 +108,17 @@ class Metric:
 # IoU and the best rotation
 
 
-def _frame(outlines: Iterable[np.ndarray], resolution: int, *, square_radius: float | None = None):
-    """Origin, pixel size and shape of a grid over the outlines' union bounding box,
-    or over the square [−r, r]² when ``square_radius`` is given. One pixel of margin."""
-    if square_radius is not None:
-        low, high = np.array([-square_radius] * 2), np.array([square_radius] * 2)
-    else:
-        points = np.concatenate(list(outlines))
-        low, high = points.min(axis=0), points.max(axis=0)
-    pixel = float(np.max(high - low)) / resolution
-    cols, rows = (np.ceil((high - low) / pixel).astype(int) + 2).tolist()
-    return low - pixel, pixel, (rows, cols)
+def _iou_of_normalised(a: np.ndarray, b: np.ndarray, lines: int = 64, *, exact: bool = True, areas=None) -> float:
+    """IoU of two outlines: intersection by scanlines, union = area a + area b − intersection."""
+    intersection = intersection_area(a, b, lines, exact=exact)
+    area_a, area_b = areas if areas is not None else (signed_area(a), signed_area(b))
+    return intersection / (area_a + area_b - intersection)
 
 
-def _raster_iou(mask_a: np.ndarray, mask_b: np.ndarray) -> float:
-    union = np.count_nonzero(mask_a | mask_b)
-    return np.count_nonzero(mask_a & mask_b) / union
-
-
-def _iou_union_box(a: np.ndarray, b: np.ndarray, resolution: int = IOU_RESOLUTION) -> float:
-    origin, pixel, shape = _frame((a, b), resolution)
-    return _raster_iou(rasterise(a, origin, pixel, shape), rasterise(b, origin, pixel, shape))
+def _simplify(outline: np.ndarray) -> np.ndarray:
+    """Douglas–Peucker simplification to ``COARSE_SIMPLIFY`` (corners kept, runs of collinear points dropped)."""
+    simple = cv2.approxPolyDP(outline.astype(np.float32)[:, None, :], COARSE_SIMPLIFY, True)[:, 0, :].astype(np.float64)
+    return simple if len(simple) >= 3 and abs(signed_area(simple)) > 0.5 else outline
 
 
 #: Best rotations of recent pairs of normalised outlines (iou and hausdorff_rel
@@ -137,44 +127,57 @@ _ROTATIONS: OrderedDict = OrderedDict()
 _ROTATIONS_KEPT = 16
 
 
+def _rotation_key(a: np.ndarray, b: np.ndarray) -> tuple:
+    return (a.shape, a.tobytes(), b.shape, b.tobytes())
+
+
+def _remember_rotation(key: tuple, angle: float) -> None:
+    _ROTATIONS[key] = angle
+    if len(_ROTATIONS) > _ROTATIONS_KEPT:
+        _ROTATIONS.popitem(last=False)
+
+
+def _local_rotation(a: np.ndarray, b: np.ndarray, within_deg: float) -> float:
+    """Best rotation of ``b`` searched only within ±``within_deg`` of none; both normalised."""
+    result = optimize.minimize_scalar(
+        lambda angle: -_iou_of_normalised(a, rotate(b, angle)),
+        bounds=(-within_deg, within_deg),
+        method="bounded",
+        options={"xatol": REFINE_TOL_DEG},
+    )
+    return float(result.x)
+
+
 def _best_rotation(a: np.ndarray, b: np.ndarray) -> float:
     """Rotation of ``b`` (degrees, in [−180, 180)) maximising the IoU with ``a``; both normalised."""
-    key = (a.shape, a.tobytes(), b.shape, b.tobytes())
+    key = _rotation_key(a, b)
     if key in _ROTATIONS:
         _ROTATIONS.move_to_end(key)
         return _ROTATIONS[key]
-    # A square frame holding every rotation of b: a is rasterised once per resolution.
-    radius = float(max(np.max(np.hypot(*a.T)), np.max(np.hypot(*b.T))))
-    frames = {}
-    for resolution in (COARSE_RESOLUTION, IOU_RESOLUTION):
-        origin, pixel, shape = _frame((), resolution, square_radius=radius)
-        frames[resolution] = (origin, pixel, shape, rasterise(a, origin, pixel, shape))
-
-    def iou_at(angle_deg: float, resolution: int) -> float:
-        origin, pixel, shape, mask_a = frames[resolution]
-        return _raster_iou(mask_a, rasterise(rotate(b, angle_deg), origin, pixel, shape))
-
     angles = np.arange(0.0, 360.0, COARSE_STEP_DEG)
-    coarse = np.array([iou_at(angle, COARSE_RESOLUTION) for angle in angles])
+    simple_a, simple_b = _simplify(a), _simplify(b)
+    simple_areas = (signed_area(simple_a), signed_area(simple_b))
+    coarse = np.array(
+        [_iou_of_normalised(simple_a, rotate(simple_b, angle), COARSE_LINES, exact=False, areas=simple_areas) for angle in angles]
+    )
+    areas = (signed_area(a), signed_area(b))
     is_peak = (coarse >= np.roll(coarse, 1)) & (coarse >= np.roll(coarse, -1))
     peaks = np.flatnonzero(is_peak)
     peaks = peaks[np.argsort(-coarse[peaks], kind="stable")][:REFINED_PEAKS]
     best_angle, best_iou = 0.0, -1.0
+    span = 1.5 * COARSE_STEP_DEG
     for peak in peaks:
         centre = float(angles[peak])
-        span = 1.5 * COARSE_STEP_DEG
         result = optimize.minimize_scalar(
-            lambda angle: -iou_at(angle, IOU_RESOLUTION),
-            bounds=(centre - span, centre + span),
+            lambda offset: -_iou_of_normalised(a, rotate(b, centre + offset), areas=areas),
+            bounds=(-span, span),
             method="bounded",
             options={"xatol": REFINE_TOL_DEG},
         )
         if -result.fun > best_iou:
-            best_angle, best_iou = float(result.x), -float(result.fun)
+            best_angle, best_iou = centre + float(result.x), -float(result.fun)
     best_angle = (best_angle + 180.0) % 360.0 - 180.0
-    _ROTATIONS[key] = best_angle
-    if len(_ROTATIONS) > _ROTATIONS_KEPT:
-        _ROTATIONS.popitem(last=False)
+    _remember_rotation(key, best_angle)
     return best_angle
 
 
@@ -182,11 +185,12 @@ def best_rotation_deg(a, b) -> float:
     """The counter-clockwise rotation of ``b`` (degrees, in [−180, 180)) that maximises its IoU with ``a``.
 
     Both outlines are normalised (centroid at 0, unit area) and ``b`` is turned
-    about its centroid. The search tries every 1° on a 256² grid, then refines
-    the three best local maxima on a 1024² grid to 0.01° (bounded
-    golden-section/Brent search). Where the IoU does not depend on the rotation
-    (either shape a circle) the angle is arbitrary; for a shape with n-fold
-    symmetry it is one of n equivalent angles.
+    about its centroid. The search tries every 1° (approximate IoU of
+    simplified outlines on 128 scanlines), then refines the three best local
+    maxima to 0.01° with the exact IoU (bounded golden-section/Brent search).
+    Where the IoU does not depend on the rotation (either shape a circle) the
+    angle is arbitrary; for a shape with n-fold symmetry it is one of n
+    equivalent angles.
     """
     return _best_rotation(normalise(a, "a"), normalise(b, "b"))
 
@@ -209,15 +213,19 @@ def iou(a, b, *, align: bool = True) -> float:
 
     Notes
     -----
-    The IoU is counted on a grid of 1024 pixels along the longer side of the
-    union's bounding box, each pixel in or out by its centre (an exact test on
-    the polygon, so no edge bias). Its error against the exact polygon IoU is
-    the rounding of the boundary pixels, below 2e-4 for the aperture shapes.
+    Exact up to rounding: the intersection is integrated on scanlines, exactly
+    across each line and by the midpoint rule between lines cut at every
+    vertex and every crossing of the two outlines, where the length inside
+    both is linear (:func:`bokehfit.metrics.outlines.intersection_area`); the
+    union is 2 − intersection. The tests hold it to shapely's exact polygon
+    IoU within 1e-9 (differences of ~1e-15 seen).
+    (A 1024² pixel mask errs by up to 4e-3 where long sides align with the
+    grid, which is why this is not one.)
     """
     a, b = normalise(a, "a"), normalise(b, "b")
     if align:
         b = rotate(b, _best_rotation(a, b))
-    return _iou_union_box(a, b)
+    return _iou_of_normalised(a, b)
 
 
 # ---------------------------------------------------------------------------
@@ -229,21 +237,18 @@ def _directed_hausdorff(samples: np.ndarray, target: np.ndarray) -> float:
 
     The largest distances among the samples are refined along their two
     neighbouring sides, where the true maximum may lie between samples."""
-    distances = segment_distances(samples, target)
+    distance_to = DistanceToOutline(target)
+    distances = distance_to(samples)
     best = float(distances.max())
     count = len(samples)
-    step = np.hypot(*(np.roll(samples, -1, axis=0) - samples).T)
-
-    def distance_at(point):
-        return float(segment_distances(point[None, :], target)[0])
-
+    step = np.hypot(*(following(samples) - samples).T)
     for index in np.argsort(-distances)[:_HAUSDORFF_REFINED]:
         for neighbour, length in (((index - 1) % count, step[index - 1]), ((index + 1) % count, step[index])):
             if distances[index] + length <= best:
                 continue  # the distance is 1-Lipschitz: this side cannot beat the best
             p, q = samples[index], samples[neighbour]
             result = optimize.minimize_scalar(
-                lambda s: -distance_at(p + s * (q - p)), bounds=(0.0, 1.0), method="bounded", options={"xatol": 1e-6}
+                lambda s: -distance_to(p + s * (q - p))[0], bounds=(0.0, 1.0), method="bounded", options={"xatol": 1e-4}
             )
             best = max(best, -float(result.fun))
     return best
@@ -315,9 +320,11 @@ def efd_distance(a, b, harmonics: int = DEFAULT_HARMONICS) -> float:
 def hu_distance(a, b) -> float:
     """``cv2.matchShapes(a, b, cv2.CONTOURS_MATCH_I2, 0)`` on the normalised outlines as float32.
 
-    I2 = Σ_i |sign(h_i^A) log10|h_i^A| − sign(h_i^B) log10|h_i^B||  over Hu's seven
+    I2 = Σ_i |m_i^A − m_i^B|, m_i = sign(h_i)·log10|h_i|, over Hu's seven
     invariants h_i; OpenCV skips an invariant that is below 1e-5 in either
-    shape (for every shape with 3-fold or higher symmetry only h1 is left).
+    shape. A circle, a regular polygon other than the triangle (which keeps
+    h3) and the star have only h1 above that, so between them this compares
+    h1 alone: the polar moment of inertia at unit area.
     Normalising first changes nothing in exact arithmetic (the invariants are)
     but keeps float32 from losing digits to large offsets.
     """
@@ -375,10 +382,15 @@ METRICS: dict[str, Metric] = {
 }
 
 
-def compare_outlines(a, b, metrics: Iterable[str] | str | None = None) -> dict[str, float]:
+def compare_outlines(
+    a, b, metrics: Iterable[str] | str | None = None, *, rotation_within_deg: float | None = None
+) -> dict[str, float]:
     """Every metric of ``METRICS`` (or those named, in that order) for two outlines.
 
-    ``iou`` and ``hausdorff_rel`` share one rotation search.
+    ``iou`` and ``hausdorff_rel`` share one rotation search. Where the outlines
+    are known to be nearly aligned already (a disc against the kernel fitted to
+    it), ``rotation_within_deg`` limits that search to ±that many degrees, which
+    is some 20 times faster than the search over every angle.
 
     Raises
     ------
@@ -392,5 +404,11 @@ def compare_outlines(a, b, metrics: Iterable[str] | str | None = None) -> dict[s
         unknown = [name for name in names if name not in METRICS]
         if unknown or not names:
             raise InputError(f"metrics must be names from {', '.join(METRICS)} (got {unknown[0] if unknown else 'none'!r})")
-    normalise(a, "a"), normalise(b, "b")  # errors name the parameter before any metric runs
+    normal_a, normal_b = normalise(a, "a"), normalise(b, "b")  # errors name the parameter first
+    if rotation_within_deg is not None:
+        within = float(rotation_within_deg)
+        if not (math.isfinite(within) and within > 0):
+            raise InputError(f"rotation_within_deg must be a positive number of degrees (got {rotation_within_deg!r})")
+        key = _rotation_key(normal_a, normal_b)
+        _remember_rotation(key, _local_rotation(normal_a, normal_b, within))
     return {name: float(METRICS[name].function(a, b)) for name in names}

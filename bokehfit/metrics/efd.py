@@ -42,7 +42,7 @@ def efd_coefficients(outline: np.ndarray, harmonics: int) -> np.ndarray:
     :func:`bokehfit.metrics.outlines.as_outline`); the DC terms A0, C0 are
     left out, since every metric ignores position.
     """
-    delta = np.roll(outline, -1, axis=0) - outline
+    delta = np.concatenate((outline[1:], outline[:1])) - outline
     dt = np.hypot(delta[:, 0], delta[:, 1])
     t = np.concatenate([[0.0], np.cumsum(dt)])
     period = t[-1]
@@ -113,8 +113,9 @@ def efd_aligned_distance(normal_a: np.ndarray, normal_b: np.ndarray) -> tuple[fl
     multiply P_n by e^{i(nτ+ψ)} and M_n by e^{i(−nτ+ψ)}; both are isometries of
     the coefficient vector (a² + b² + c² + d² = 2(|P|² + |M|²) per harmonic).
     The best ψ for a given τ is the phase that makes the cross-correlation
-    S(τ) = Σ conj(A) B e^{±inτ} real, so the search is over τ alone: a grid,
-    plus τ = 0 and π (the two K&G normal forms), then a bounded refinement.
+    S(τ) = Σ conj(A) B e^{±inτ} real, so the search is over τ alone: a grid
+    that includes τ = 0 and π (the two K&G normal forms), then a bounded
+    refinement. The result is therefore never above K&G's own distance.
 
     Returns
     -------
@@ -138,8 +139,8 @@ def efd_aligned_distance(normal_a: np.ndarray, normal_b: np.ndarray) -> tuple[fl
         # From the difference, not from |A|² + |B|² − 2|S|, which cancels.
         return float(np.linalg.norm(normal_a - moved)), psi
 
-    size = _SHIFT_GRID_PER_HARMONIC * len(n)
-    grid = np.concatenate([2.0 * np.pi * np.arange(size) / size, [0.0, np.pi]])
+    size = _SHIFT_GRID_PER_HARMONIC * len(n)  # even: the grid holds τ = 0 and π
+    grid = 2.0 * np.pi * np.arange(size) / size
     best = float(grid[np.argmax(correlation(grid))])
     step = 2.0 * np.pi / size
     # The distance itself, not |S|, is refined: near a match it has a sharp

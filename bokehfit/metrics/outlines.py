@@ -1,6 +1,6 @@
 """Outlines: closed simple polygons as (N, 2) arrays of (x, y) points.
 
-The helpers here check, normalise, densify, rotate and rasterise outlines for
+The helpers here check, normalise, densify, rotate and intersect outlines for
 the shape metrics of :mod:`bokehfit.metrics`. An outline may come in either
 orientation, from any start point and in any units; :func:`normalise` puts it
 in one frame (centroid at 0, unit area, counter-clockwise), so that every
@@ -25,8 +25,9 @@ __all__ = [
     "densify",
     "rotate",
     "aperture_outline",
-    "rasterise",
-    "segment_distances",
+    "intersection_area",
+    "following",
+    "DistanceToOutline",
     "DEFAULT_POINTS",
 ]
 
@@ -75,12 +76,17 @@ def as_outline(outline, name: str = "outline") -> np.ndarray:
     return points
 
 
+def following(outline: np.ndarray) -> np.ndarray:
+    """Each point's successor along the closed outline (the last's is the first)."""
+    return np.concatenate((outline[1:], outline[:1]))
+
+
 def signed_area(outline: np.ndarray) -> float:
     """Shoelace area: positive for counter-clockwise outlines."""
-    x, y = outline[:, 0], outline[:, 1]
     # Subtract a point first: the sum of cross products then doesn't cancel large offsets.
-    x, y = x - x[0], y - y[0]
-    return 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
+    p = outline - outline[0]
+    q = following(p)
+    return 0.5 * float(np.sum(p[:, 0] * q[:, 1] - q[:, 0] * p[:, 1]))
 
 
 def centroid(outline: np.ndarray) -> np.ndarray:
@@ -92,7 +98,7 @@ def centroid(outline: np.ndarray) -> np.ndarray:
     """
     origin = outline[0]
     p = outline - origin
-    q = np.roll(p, -1, axis=0)
+    q = following(p)
     cross = p[:, 0] * q[:, 1] - q[:, 0] * p[:, 1]
     area = 0.5 * float(np.sum(cross))
     return origin + np.sum((p + q) * cross[:, None], axis=0) / (6.0 * area)
@@ -100,7 +106,7 @@ def centroid(outline: np.ndarray) -> np.ndarray:
 
 def perimeter(outline: np.ndarray) -> float:
     """Length of the closed outline."""
-    return float(np.sum(np.hypot(*(np.roll(outline, -1, axis=0) - outline).T)))
+    return float(np.sum(np.hypot(*(following(outline) - outline).T)))
 
 
 def normalise(outline, name: str = "outline") -> np.ndarray:
@@ -142,7 +148,7 @@ def densify(outline: np.ndarray, points: int = DEFAULT_POINTS) -> np.ndarray:
     equal pieces, step = perimeter / points. Sides already shorter than the
     step are left alone, so a dense outline stays as it is.
     """
-    q = np.roll(outline, -1, axis=0)
+    q = following(outline)
     lengths = np.hypot(*(q - outline).T)
     step = float(np.sum(lengths)) / points
     pieces = np.maximum(1, np.round(lengths / step).astype(np.int64))
@@ -189,47 +195,115 @@ def aperture_outline(aperture: Aperture, points: int = DEFAULT_POINTS) -> np.nda
     return densify(vertices, int(points))
 
 
-def rasterise(outline: np.ndarray, origin_xy, pixel: float, shape: tuple[int, int]) -> np.ndarray:
-    """Boolean mask of the pixels whose centres lie inside the outline.
+#: Passes of :func:`intersection_area` that add the crossings of the two
+#: outlines' sides as slab boundaries (one or two suffice; the cap only guards
+#: against rounding that keeps re-finding a crossing already cut).
+_CROSSING_PASSES = 8
 
-    Pixel ``(i, j)`` (row i, column j) has its centre at
-    ``origin_xy + ((j + ½)·pixel, (i + ½)·pixel)``: rows run along +y here, the
-    mask is never shown, only counted. The test is exact for every centre
-    (even-odd rule on scanlines through the centres, half-open in y so a vertex
-    on a scanline is counted once; in x a centre on an edge counts as inside
-    left of the shape and outside right of it), so the area error has no bias, unlike
-    ``cv2.fillPoly``, which also fills the pixels its edges touch (about a third
-    of a pixel too wide all round).
+
+def intersection_area(a: np.ndarray, b: np.ndarray, lines: int = 64, *, exact: bool = True) -> float:
+    """Area of the intersection of two closed simple polygons, by scanlines exact in x.
+
+    The y range the two share is cut into slabs at every vertex of either
+    outline, at ``lines`` evenly spaced lines and (``exact``) at every point
+    where a side of ``a`` crosses a side of ``b``. On the centre line of each
+    slab the spans inside each polygon are found exactly (even-odd rule on the
+    sides' crossings), and the length inside both times the slab's height is
+    summed: a 1-D rasterisation, exact across x.
+
+    Notes
+    -----
+    Within a slab no outline has a vertex, so the length inside both, L(y), is
+    linear except where a side of ``a`` crosses a side of ``b``. With those
+    crossings cut too, the midpoint rule is exact and the area is exact up to
+    rounding (shapely agrees to 1e-12). A crossing shows itself as two sides,
+    neighbours in x on the centre line, whose order differs at the slab's top
+    or bottom; the pass that finds them is repeated until none is left.
+    ``lines`` then only keeps slabs short. Without ``exact`` each uncut
+    crossing errs by up to about h²·|Δs|/8 (h the slab's height, Δs the
+    difference of the sides' dx/dy): ~2e-5 of the IoU of irregular outlines at
+    1024 lines. A 1024² pixel mask errs by up to 4e-3, where long sides align
+    with the grid, cv2.fillPoly more (it also fills the pixels that its edges
+    touch, about a third of a pixel too wide all round).
     """
-    rows, cols = shape
-    p = (outline - np.asarray(origin_xy, dtype=np.float64)) / pixel - 0.5
-    q = np.roll(p, -1, axis=0)
-    y_low, y_high = np.minimum(p[:, 1], q[:, 1]), np.maximum(p[:, 1], q[:, 1])
-    first = np.clip(np.ceil(y_low), 0, rows).astype(np.int64)
-    stop = np.clip(np.ceil(y_high), 0, rows).astype(np.int64)
-    count = stop - first  # scanlines r with y_low <= r < y_high
-    edge = np.repeat(np.arange(len(p)), count)
-    row = first[edge] + np.arange(len(edge)) - np.repeat(np.cumsum(count) - count, count)
-    x0, y0, x1, y1 = p[edge, 0], p[edge, 1], q[edge, 0], q[edge, 1]
-    x = x0 + (row - y0) * (x1 - x0) / (y1 - y0)
-    # Even-odd rule: each crossing toggles in/out from the first centre at or
-    # right of it (column ⌈x⌉); a running XOR along the row fills the spans.
-    column = np.clip(np.ceil(x), 0, cols).astype(np.int64)
-    index, count = np.unique(row * (cols + 1) + column, return_counts=True)
-    toggles = np.zeros(rows * (cols + 1), dtype=bool)
-    toggles[index[count % 2 == 1]] = True
-    return np.bitwise_xor.accumulate(toggles.reshape(rows, cols + 1)[:, :cols], axis=1)
+    low = max(a[:, 1].min(), b[:, 1].min())
+    high = min(a[:, 1].max(), b[:, 1].max())
+    if not high > low:
+        return 0.0
+    cuts = np.concatenate([a[:, 1], b[:, 1], np.linspace(low, high, lines + 1)])
+    cuts = np.unique(cuts[(cuts >= low) & (cuts <= high)])
+    sides = [_sides(outline) for outline in (a, b)]
+    for _ in range(_CROSSING_PASSES):
+        mids = 0.5 * (cuts[:-1] + cuts[1:])
+        records = [_scanline_crossings(mids, *side, tag) for tag, side in enumerate(sides)]
+        slab, x, tag, x0, y0, slope = (np.concatenate(v) for v in zip(*records))
+        order = np.lexsort((x, slab))
+        slab, x, tag, x0, y0, slope = (v[order] for v in (slab, x, tag, x0, y0, slope))
+        if not exact:
+            break
+        # Neighbours on the centre line (x[i] <= x[i+1]) swapped at the bottom or top cross in between.
+        same = slab[1:] == slab[:-1]
+        bottom, top = cuts[slab[:-1]], cuts[slab[:-1] + 1]
+
+        def at(y, index):
+            return x0[index] + (y - y0[index]) * slope[index]
+
+        left, right = np.arange(len(x) - 1), np.arange(1, len(x))
+        # A margin keeps coincident sides (a shape against itself), which cross
+        # nowhere, from looking swapped by rounding.
+        margin = 1e-12 * (high - low)
+        swapped = same & (slope[left] != slope[right])
+        swapped &= (at(bottom, right) < at(bottom, left) - margin) | (at(top, right) < at(top, left) - margin)
+        if not np.any(swapped):
+            break
+        i, j = left[swapped], right[swapped]
+        # x_i(y) = x_j(y): y = (x0_j − x0_i − y0_j s_j + y0_i s_i) / (s_i − s_j)
+        y_cross = (x0[j] - x0[i] - y0[j] * slope[j] + y0[i] * slope[i]) / (slope[i] - slope[j])
+        y_cross = np.clip(y_cross, bottom[swapped], top[swapped])
+        cuts = np.unique(np.concatenate([cuts, y_cross]))
+    height = np.diff(cuts)
+    # Inside a (b) after a crossing: an odd count of a's (b's) crossings so far.
+    # Every slab holds an even count of each, so the running count needs no reset.
+    inside_a = np.cumsum(tag == 0) % 2 == 1
+    inside_b = np.cumsum(tag == 1) % 2 == 1
+    both = (inside_a & inside_b)[:-1] & (slab[1:] == slab[:-1])
+    return float(np.sum((x[1:] - x[:-1])[both] * height[slab[:-1][both]]))
 
 
-def segment_distances(points: np.ndarray, outline: np.ndarray, chunk: int = 256) -> np.ndarray:
-    """Distance from each point to the nearest point of the closed outline (its sides, not its vertices)."""
-    a = outline
-    d = np.roll(outline, -1, axis=0) - a
-    length_sq = np.sum(d * d, axis=1)
-    result = np.empty(len(points))
-    for start in range(0, len(points), chunk):
-        p = points[start : start + chunk, None, :]
-        t = np.clip(np.sum((p - a) * d, axis=2) / length_sq, 0.0, 1.0)
-        nearest = a + t[..., None] * d
-        result[start : start + chunk] = np.sqrt(np.min(np.sum((p - nearest) ** 2, axis=2), axis=1))
-    return result
+def _sides(outline: np.ndarray):
+    """The non-horizontal sides: start x, start y, end y, dx/dy."""
+    q = following(outline)
+    keep = outline[:, 1] != q[:, 1]
+    p, q = outline[keep], q[keep]
+    return p[:, 0], p[:, 1], q[:, 1], (q[:, 0] - p[:, 0]) / (q[:, 1] - p[:, 1])
+
+
+def _scanline_crossings(mids, x0, y0, y1, slope, tag):
+    """Where the sides cross the slabs' centre lines: slab, x, tag, and each side's x0, y0, slope."""
+    # Centre lines never pass through a vertex (every vertex is a cut), so no
+    # crossing is counted twice.
+    first = np.searchsorted(mids, np.minimum(y0, y1))
+    count = np.searchsorted(mids, np.maximum(y0, y1)) - first
+    side = np.repeat(np.arange(len(x0)), count)
+    slab = first[side] + np.arange(len(side)) - np.repeat(np.cumsum(count) - count, count)
+    x = x0[side] + (mids[slab] - y0[side]) * slope[side]
+    return slab, x, np.full(len(side), tag), x0[side], y0[side], slope[side]
+
+
+class DistanceToOutline:
+    """Distances from points to the nearest point of a closed outline (its sides, not only its vertices)."""
+
+    def __init__(self, outline: np.ndarray):
+        self.start = outline
+        self.side = following(outline) - outline
+        self.length_sq = np.sum(self.side * self.side, axis=1)
+
+    def __call__(self, points: np.ndarray, chunk: int = 256) -> np.ndarray:
+        points = np.atleast_2d(points)
+        result = np.empty(len(points))
+        for first in range(0, len(points), chunk):
+            p = points[first : first + chunk, None, :]
+            t = np.clip(np.sum((p - self.start) * self.side, axis=2) / self.length_sq, 0.0, 1.0)
+            nearest = self.start + t[..., None] * self.side
+            result[first : first + chunk] = np.sqrt(np.min(np.sum((p - nearest) ** 2, axis=2), axis=1))
+        return result
