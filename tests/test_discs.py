@@ -115,7 +115,9 @@ def test_every_shape_and_size_is_found_and_measured(case):
 def jpeg_round_trip(linear, quality):
     ok, data = cv2.imencode(".jpg", encode_srgb8(linear), [cv2.IMWRITE_JPEG_QUALITY, quality])
     decoded = cv2.imdecode(data, cv2.IMREAD_GRAYSCALE)
-    import colour
+    from bokehfit.io.colour import colour_science
+
+    colour = colour_science()
 
     lut = colour.cctf_decoding(np.arange(256) / 255.0, function="sRGB").astype(np.float32)
     return lut[decoded], decoded == 255

@@ -267,7 +267,9 @@ def test_unknown_icc_profile_uses_its_own_curve_and_colorants(tmp_path):
     "name,space", [("Display P3", "Display P3"), ("ProPhoto RGB", "ProPhoto RGB"), ("sRGB IEC61966-2.1", "sRGB")]
 )
 def test_icc_profiles_recognised_by_name(tmp_path, name, space):
-    import colour
+    from bokehfit.io.colour import colour_science
+
+    colour = colour_science()
 
     codes = random_codes((16, 16, 3), 8, seed=33)
     photo = load_photo(write_png(tmp_path / "named.png", codes, icc=make_icc_profile(name)))

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import functools
 import struct
+import warnings
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -59,12 +60,22 @@ KNOWN_SPACES = {
 Curve = Callable[[np.ndarray], np.ndarray]
 
 
+@functools.lru_cache(maxsize=1)
+def colour_science():
+    """The ``colour`` package, imported on first use (it takes over a second).
+
+    colour-science warns at import about optional packages it can't find
+    (matplotlib, …) that bokehfit does not use; those warnings are dropped here.
+    """
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=r".*related API features are not available")
+        import colour
+    return colour
+
+
 @functools.lru_cache(maxsize=None)
 def _colourspace(name: str):
-    # colour-science takes about 2 s to import: only pay for it when a curve is needed.
-    import colour
-
-    return colour.RGB_COLOURSPACES[name]
+    return colour_science().RGB_COLOURSPACES[name]
 
 
 @functools.lru_cache(maxsize=None)
