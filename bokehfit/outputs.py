@@ -47,10 +47,17 @@ def check_output_path(path: str | os.PathLike, suffixes: Iterable[str], inputs: 
     return path
 
 
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
 def write_atomic(path: Path, write: Callable[[Path], None]) -> None:
     """Call ``write(temporary_path)``, then rename the temporary file to ``path``."""
     fd, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent)
     os.close(fd)
+    os.chmod(temporary, 0o666 & ~_umask())  # mkstemp makes it private; outputs get the usual mode
     try:
         write(Path(temporary))
         os.replace(temporary, path)

@@ -64,6 +64,10 @@ MIN_SOLIDITY = 0.6
 #: two discs make two; the star's five are its own; outline noise stays below 0.2 px.
 OVERLAP_DEFECT_DEPTH = 0.04
 OVERLAP_DEFECT_MIN_PX = 1.0
+#: A disc whose surrounding ring has its median above its 10th percentile by
+#: more than this share of the disc's contrast sits on other light (most of its
+#: surround is another disc) and is flagged ``overlaps``.
+MAX_RING_LIFT = 0.5
 _SUBPIXEL = 16
 MAX_ELONGATION = 15.0
 EDGE_WIDTH_MIN_PX = 3.0
@@ -98,13 +102,14 @@ class Measurement:
 
 
 
-def _annulus_levels(crop: np.ndarray, distance: np.ndarray, radius: float) -> tuple[float, float]:
-    """Median and robust spread of the annulus 1.3 r … 1.7 r (+ 2 px) around the centre."""
+def _annulus_levels(crop: np.ndarray, distance: np.ndarray, radius: float) -> tuple[float, float, float]:
+    """Median, robust spread and lift (median − 10th percentile) of the annulus 1.3 r … 1.7 r (+ 2 px)."""
     ring = crop[(distance >= 1.3 * radius + 1.0) & (distance <= 1.7 * radius + 3.0)]
     if ring.size < 8:
         ring = crop[distance >= 1.3 * radius + 1.0]
     median = float(np.median(ring))
-    return median, 1.4826 * float(np.median(np.abs(ring - median)))
+    low = float(np.percentile(ring, 10))
+    return median, 1.4826 * float(np.median(np.abs(ring - median))), median - low
 
 
 def _edge_gradient(crop: np.ndarray, outline: np.ndarray) -> float:
@@ -179,7 +184,7 @@ def _closed_outline(luminance, center_xy, radius, reach):
         window, distance = _window(luminance, center_xy, half)
         r0, c0, r1, c1 = window
         crop = luminance[r0:r1, c0:c1]
-        background, noise = _annulus_levels(crop, distance, radius)
+        background, noise, ring_lift = _annulus_levels(crop, distance, radius)
         core = crop[distance <= max(0.8 * radius, 0.75)]
         plateau = float(np.percentile(core, 90)) if core.size else background
         level = background + 0.5 * (plateau - background)
@@ -190,7 +195,7 @@ def _closed_outline(luminance, center_xy, radius, reach):
         if outline is None:
             return "no outline"
         if not _open_in_window(outline, crop.shape, window, (height, width)):
-            return window, crop, (background, plateau, noise), outline, False
+            return window, crop, (background, plateau, noise, ring_lift), outline, False
     # Still open: part of a larger bright structure, or discs run together. Cut
     # the disc out of it with a circle through its neighbours' gap.
     masked = np.where(distance <= reach, crop, min(background, level - 1e-6)).astype(np.float32)
@@ -200,7 +205,7 @@ def _closed_outline(luminance, center_xy, radius, reach):
     on_cut = np.abs(np.hypot(outline[:, 0] - seed_rc[1], outline[:, 1] - seed_rc[0]) - reach) < 1.0
     if on_cut.mean() > MAX_CUT_SHARE:  # mostly the cutting circle: a piece of something larger
         return "part of a larger region"
-    return window, crop, (background, plateau, noise), outline, True
+    return window, crop, (background, plateau, noise, ring_lift), outline, True
 
 
 def _contrast_ok(contrast: float, noise: float, background: float) -> bool:
@@ -236,7 +241,7 @@ def measure_candidate(
             break
         center_xy, radius = (cx + c0, cy + r0), max(1.0, math.sqrt(area / math.pi))
         reach = float(np.max(np.hypot(outline[:, 0] - cx, outline[:, 1] - cy)))
-    (r0, c0, r1, c1), crop, (background, plateau, noise), outline, merged = found
+    (r0, c0, r1, c1), crop, (background, plateau, noise, ring_lift), outline, merged = found
     contrast = plateau - background
     area, cx, cy = _polygon_area_centroid(outline)
     diameter = 2.0 * math.sqrt(area / math.pi)
@@ -260,6 +265,9 @@ def measure_candidate(
             clipped_beyond = bool(ring.any()) and clipped_crop[ring].mean() > MAX_CLIPPED_RING_SHARE
     depth = max(OVERLAP_DEFECT_MIN_PX, OVERLAP_DEFECT_DEPTH * 0.5 * diameter)
     merged = merged or 2 <= _deep_concavities(outline, depth) <= 4
+    # Most of its surround lifted above the rest by other light: the bright lens
+    # where two discs overlap, or a disc sitting on another one.
+    merged = merged or ring_lift > MAX_RING_LIFT * contrast
     snr = contrast / max(noise, min_noise)
 
     reason = None

@@ -200,7 +200,8 @@ def fit_aperture(
             "under 8 px": sum(not d.resolvable for d in discs),
         }
         why = ", ".join(f"{n} {what}" for what, n in flagged.items() if n)
-        return ApertureFit(False, f"no disc is clean enough to fit ({len(discs)} found: {why})")
+        found = f"{len(discs)} found: {why}" if discs else "none found"
+        return ApertureFit(False, f"no disc is clean enough to fit ({found})")
 
     screened = [screen(d.outline_xy, families, _slit_aspect(d)) for d in chosen]
     mean_rms = {f.name: np.mean([next(s.rms for s in disc_screens if s.family == f) for disc_screens in screened]) for f in families}

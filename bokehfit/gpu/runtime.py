@@ -60,7 +60,10 @@ def use_headless_egl() -> None:
     """
     os.environ.setdefault("EGL_PLATFORM", "surfaceless")
     if not os.environ.get("XDG_RUNTIME_DIR"):
-        os.environ["XDG_RUNTIME_DIR"] = tempfile.mkdtemp(prefix="bokehfit-runtime-")
+        # One private, empty folder per user, reused by every process (nothing is left behind).
+        folder = os.path.join(tempfile.gettempdir(), f"bokehfit-runtime-{os.getuid()}")
+        os.makedirs(folder, mode=0o700, exist_ok=True)
+        os.environ["XDG_RUNTIME_DIR"] = folder
 
 
 def _rank(info) -> int:

@@ -1,0 +1,308 @@
+"""The aperture fit on synthetic photos with known answers: family, angle, size, model selection.
+
+Every photo is rendered by :func:`bokehfit.synthetic.render_discs` (exact pixel
+coverage, 0.6-px edge blur, Gaussian noise σ = ``NOISE_SIGMA`` linear, fixed
+seeds), searched with :func:`bokehfit.discs.find_discs` and fitted with
+:func:`bokehfit.fit.fit_aperture` over all families. Two paths:
+
+* linear: the float32 array itself (no quantisation): every family must win;
+* JPEG: ``encode_srgb8`` → ``cv2.imencode`` at quality 80 → file →
+  ``bokehfit.io.load_photo``: at least ``JPEG_MIN_CORRECT`` of the nine
+  families must win.
+
+Angles are compared modulo the shape's symmetry (:func:`bokehfit.metrics.angle_error`);
+each fitted disc's equal-area diameter is compared with the disc it was
+rendered as (nearest centre).
+"""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+import pytest
+
+from bokehfit.apertures import make_aperture
+from bokehfit.discs import find_discs
+from bokehfit.errors import InputError
+from bokehfit.fit import fit_aperture
+from bokehfit.io import load_photo
+from bokehfit.metrics import angle_error
+from bokehfit.synthetic import SyntheticDisc, encode_srgb8, render_discs
+
+NOISE_SIGMA = 0.003
+#: Equal-area diameters of the discs of each family's photo, px.
+DIAMETERS_PX = (12, 20, 35, 60, 100, 160)
+#: Largest error of the fitted aperture angle (modulo symmetry), degrees.
+ANGLE_TOL_DEG = 0.2
+ANGLE_TOL_JPEG_DEG = 0.5
+#: Largest median |fitted − true| / true equal-area diameter over a photo's discs.
+DIAMETER_TOL_REL = 0.005
+DIAMETER_TOL_JPEG_REL = 0.01
+#: Largest such error of any one disc (the 12-px ones included: that slit is 3.2 px wide).
+DIAMETER_TOL_MAX_REL = 0.02
+DIAMETER_TOL_MAX_JPEG_REL = 0.04
+JPEG_QUALITY = 80
+#: Families (of the nine below) that must win after the JPEG round trip.
+JPEG_MIN_CORRECT = 8
+SLIT_ASPECT = 0.3
+
+# (family name as the fitter reports it, SyntheticDisc shape, blades, aspect, angle)
+FAMILY_CASES = [
+    ("circle", "circle", None, None, 0.0),
+    ("square", "square", None, None, 20.0),
+    ("slit", "slit", None, SLIT_ASPECT, 30.0),
+    ("triangle", "triangle", None, None, 40.0),
+    ("pentagon", "pentagon", None, None, 50.0),
+    ("hexagon", "hexagon", None, None, 25.0),
+    ("star", "star", None, None, 10.0),
+    ("ngon(7)", "ngon", 7, None, 33.0),
+    ("ngon(9)", "ngon", 9, None, 17.0),
+]
+CASE_IDS = [case[0] for case in FAMILY_CASES]
+
+
+def row_of_discs(shape, angle_deg, diameters, *, blades=None, aspect=None, side="far", seed=1):
+    """Discs left to right on one row, apart by 1.3 × their reach + 12 px: (discs, width, height)."""
+    aperture = make_aperture(shape, angle_deg, blades=blades, aspect=aspect)
+    reach = [aperture.extent() * d * math.sqrt(math.pi) / 2 for d in diameters]
+    gap = 12
+    height = int(2 * max(reach) + 2 * gap)
+    rng = np.random.default_rng(seed)
+    discs, x = [], float(gap)
+    for d, r in zip(diameters, reach):
+        x += r
+        centre = (x + rng.uniform(-0.5, 0.5), height / 2 + rng.uniform(-0.5, 0.5))  # sub-pixel centres
+        discs.append(SyntheticDisc(centre, d, shape, angle_deg, blades, aspect, side, brightness=0.6))
+        x += 1.3 * r + gap
+    return discs, int(x + gap), height
+
+
+def render(discs, width, height, seed=3):
+    return render_discs(width, height, discs, noise_sigma=NOISE_SIGMA, seed=seed)
+
+
+def jpeg_round_trip(linear, path):
+    """``linear`` through an 8-bit sRGB JPEG file and the loader: (luminance, clipped)."""
+    ok, encoded = cv2.imencode(".jpg", encode_srgb8(linear), [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
+    assert ok
+    path.write_bytes(encoded.tobytes())
+    photo = load_photo(path)
+    return photo.luminance, photo.clipped
+
+
+def fit_photo(luminance, clipped=None, **options):
+    if clipped is None:
+        clipped = luminance >= 1.0
+    search = find_discs(luminance, clipped)
+    return fit_aperture(luminance, search.discs, **options)
+
+
+def diameter_errors(fit, truth):
+    """|fitted − true| / true equal-area diameter of every fitted disc (matched by nearest centre)."""
+    errors = []
+    for item in fit.disc_fits:
+        fitted = item.fits[fit.family.name]
+        nearest = min(truth, key=lambda t: math.dist(t.center_xy, fitted.center_xy))
+        assert math.dist(nearest.center_xy, fitted.center_xy) < max(1.0, 0.05 * nearest.diameter_px)
+        errors.append(abs(fitted.diameter_px - nearest.diameter_px) / nearest.diameter_px)
+    return np.array(errors)
+
+
+def aperture_angle_error(fit, angle_deg):
+    return angle_error(fit.aperture.angle_deg, angle_deg, fit.aperture.symmetry_deg)
+
+
+def describe(fit):
+    ranked = ", ".join(f"{c.family.name} ΔBIC {c.delta_bic:.0f}" for c in fit.candidates)
+    return f"{fit.message} [{ranked}]"
+
+
+# --------------------------------------------------------------------------------------
+# Every family, linear light
+# --------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("name,shape,blades,aspect,angle", FAMILY_CASES, ids=CASE_IDS)
+def test_family_angle_and_size_linear(name, shape, blades, aspect, angle):
+    truth, width, height = row_of_discs(shape, angle, DIAMETERS_PX, blades=blades, aspect=aspect)
+    fit = fit_photo(render(truth, width, height))
+    assert fit, fit.message
+    assert len(fit.disc_fits) == len(DIAMETERS_PX), "every disc is clean and should be fitted"
+    assert fit.family.name == name, describe(fit)
+    assert fit.sure, describe(fit)
+    assert fit.candidates[0].delta_bic == 0.0 and all(c.delta_bic > 0 for c in fit.candidates[1:])
+    if shape == "circle":
+        assert fit.aperture.symmetry_deg is None and fit.aperture.canonical_angle_deg is None
+    else:
+        assert aperture_angle_error(fit, angle) < ANGLE_TOL_DEG, describe(fit)
+        assert 0.0 <= fit.aperture.canonical_angle_deg < fit.aperture.symmetry_deg
+    if shape == "slit":
+        assert fit.aperture.aspect == pytest.approx(SLIT_ASPECT, abs=0.01)
+    errors = diameter_errors(fit, truth)
+    assert np.median(errors) < DIAMETER_TOL_REL, errors
+    assert errors.max() < DIAMETER_TOL_MAX_REL, errors
+
+
+# --------------------------------------------------------------------------------------
+# Every family through a quality-80 JPEG
+# --------------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def jpeg_fits(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("fit_jpeg")
+    results = {}
+    for name, shape, blades, aspect, angle in FAMILY_CASES:
+        truth, width, height = row_of_discs(shape, angle, DIAMETERS_PX, blades=blades, aspect=aspect, seed=2)
+        luminance, clipped = jpeg_round_trip(render(truth, width, height, seed=11), folder / f"{name}.jpg")
+        results[name] = (fit_photo(luminance, clipped), truth, angle)
+    return results
+
+
+def test_jpeg_q80_shape_accuracy(jpeg_fits):
+    lines = [f"{name}: {describe(fit)}" for name, (fit, _, _) in jpeg_fits.items()]
+    correct = sum(bool(fit) and fit.family.name == name for name, (fit, _, _) in jpeg_fits.items())
+    assert correct >= JPEG_MIN_CORRECT, f"{correct}/{len(jpeg_fits)} families right:\n" + "\n".join(lines)
+
+
+@pytest.mark.parametrize("name", CASE_IDS)
+def test_jpeg_q80_angle_and_size(jpeg_fits, name):
+    fit, truth, angle = jpeg_fits[name]
+    assert fit, fit.message
+    if fit.family.name != name:
+        pytest.skip(f"{name} fitted as {fit.family.name}: counted by test_jpeg_q80_shape_accuracy")
+    if fit.aperture.symmetry_deg is not None:
+        assert aperture_angle_error(fit, angle) < ANGLE_TOL_JPEG_DEG, describe(fit)
+    errors = diameter_errors(fit, truth)
+    assert np.median(errors) < DIAMETER_TOL_JPEG_REL, errors
+    assert errors.max() < DIAMETER_TOL_MAX_JPEG_REL, errors
+
+
+# --------------------------------------------------------------------------------------
+# Angles at the symmetry wrap
+# --------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "shape,angle",
+    [("hexagon", 59.9), ("hexagon", 0.1), ("triangle", 119.95), ("square", 89.95)],
+    ids=["hexagon-59.9", "hexagon-0.1", "triangle-119.95", "square-89.95"],
+)
+def test_angle_at_the_symmetry_wrap(shape, angle):
+    truth, width, height = row_of_discs(shape, angle, (25, 45, 70))
+    fit = fit_photo(render(truth, width, height))
+    assert fit.family.name == shape, describe(fit)
+    symmetry = fit.aperture.symmetry_deg
+    assert 0.0 <= fit.aperture.canonical_angle_deg < symmetry
+    assert aperture_angle_error(fit, angle) < ANGLE_TOL_DEG, (fit.aperture.canonical_angle_deg, describe(fit))
+    assert fit.angle_uncertainty_deg < 0.5, "discs on both sides of the wrap must not look like a spread"
+
+
+# --------------------------------------------------------------------------------------
+# Model selection
+# --------------------------------------------------------------------------------------
+
+
+def test_circle_chosen_over_twelve_blades_for_round_discs():
+    """A 12-gon can mimic a circle closely; its extra parameters (angle, blades) buy no lower residual."""
+    truth, width, height = row_of_discs("circle", 0.0, (30, 50, 80, 120))
+    fit = fit_photo(render(truth, width, height), shapes=["circle", "ngon(12)"])
+    assert fit.family.name == "circle", describe(fit)
+    assert [c.family.name for c in fit.candidates] == ["circle", "ngon(12)"]
+    assert fit.candidates[1].delta_bic > 0
+    assert fit.aperture.shape == "circle" and fit.aperture.canonical_angle_deg is None
+
+
+def test_twelve_blades_chosen_over_circle_when_the_discs_show_them():
+    truth, width, height = row_of_discs("ngon", 7.0, (60, 90, 120), blades=12)
+    fit = fit_photo(render(truth, width, height), shapes=["circle", "ngon(12)"])
+    assert fit.family.name == "ngon(12)", describe(fit)
+    assert fit.candidates[1].family.name == "circle" and fit.candidates[1].delta_bic > 0
+    assert aperture_angle_error(fit, 7.0) < 1.0
+
+
+# --------------------------------------------------------------------------------------
+# No usable disc: a falsy result that says why
+# --------------------------------------------------------------------------------------
+
+SATURATED = [SyntheticDisc((60, 60), 50, "hexagon", 10, brightness=2.5), SyntheticDisc((160, 60), 40, "hexagon", 10, brightness=3.0)]
+CLIPPED = [SyntheticDisc((5, 60), 50, "hexagon", 10), SyntheticDisc((215, 60), 40, "hexagon", 10)]
+OVERLAPPING = [
+    SyntheticDisc((60, 60), 50, "hexagon", 10, brightness=0.4),
+    SyntheticDisc((105, 73.5), 50, "hexagon", 10, brightness=0.3),
+]
+ALL_BAD = [
+    SyntheticDisc((60, 60), 50, "hexagon", 10, brightness=2.5),  # saturated
+    SyntheticDisc((5, 160), 50, "hexagon", 10),  # cut by the frame
+    SyntheticDisc((160, 150), 50, "hexagon", 10),  # an overlapping pair
+    SyntheticDisc((190, 170), 50, "hexagon", 10, brightness=0.5),
+]
+
+
+@pytest.mark.parametrize(
+    "discs,size,reasons",
+    [
+        (SATURATED, (220, 120), ["saturated"]),
+        (CLIPPED, (220, 120), ["cut by the frame"]),
+        (OVERLAPPING, (220, 140), ["overlapping"]),
+        (ALL_BAD, (260, 230), ["saturated", "cut by the frame", "overlapping"]),
+    ],
+    ids=["saturated", "clipped-by-frame", "overlapping", "all-three"],
+)
+def test_no_clean_disc_gives_falsy_fit_naming_why(discs, size, reasons):
+    luminance = render(discs, *size, seed=5)
+    search = find_discs(luminance, luminance >= 1.0)
+    assert search, "the discs are there; they are just unusable"
+    assert not any(d.usable for d in search.discs)
+    fit = fit_aperture(luminance, search.discs)
+    assert not fit
+    assert fit.aperture is None and fit.candidates == [] and fit.disc_fits == []
+    assert "no disc is clean enough" in fit.message
+    for reason in reasons:
+        assert reason in fit.message, fit.message
+
+
+def test_no_disc_at_all_gives_falsy_fit():
+    fit = fit_aperture(np.full((64, 64), 0.02, np.float32), [])
+    assert not fit
+    assert "none found" in fit.message
+
+
+def test_unknown_focus_side_is_refused():
+    with pytest.raises(InputError, match="focus_side"):
+        fit_aperture(np.zeros((32, 32), np.float32), [], focus_side="behind")
+
+
+def test_unknown_shape_is_refused():
+    truth, width, height = row_of_discs("hexagon", 5.0, (30,))
+    luminance = render(truth, width, height)
+    with pytest.raises(InputError, match="hexgon"):
+        fit_aperture(luminance, find_discs(luminance).discs, shapes=["hexgon"])
+
+
+# --------------------------------------------------------------------------------------
+# Lights in front of the focus plane
+# --------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("shape,angle", [("pentagon", 20.0), ("triangle", 30.0)])
+def test_near_discs_show_the_aperture_turned_by_180(shape, angle):
+    truth, width, height = row_of_discs(shape, angle, (30, 50, 70), side="near")
+    luminance = render(truth, width, height)
+    symmetry = make_aperture(shape).symmetry_deg
+    seen_expected = (angle + 180.0) % symmetry  # pentagon 20° → 56°; triangle 30° → 90°
+    assert angle_error(seen_expected, angle, symmetry) > 10.0, "odd symmetry: the two readings differ"
+
+    unknown = fit_photo(luminance)
+    assert unknown.family.name == shape, describe(unknown)
+    assert unknown.focus_side == "unknown"
+    assert angle_error(unknown.candidates[0].angle_deg, seen_expected, symmetry) < ANGLE_TOL_DEG
+    assert angle_error(unknown.aperture.angle_deg, seen_expected, symmetry) < ANGLE_TOL_DEG  # taken as far
+
+    near = fit_photo(luminance, focus_side="near")
+    assert near.focus_side == "near"
+    assert angle_error(near.candidates[0].angle_deg, seen_expected, symmetry) < ANGLE_TOL_DEG  # the same discs
+    assert angle_error(near.aperture.angle_deg, angle, symmetry) < ANGLE_TOL_DEG
+    assert near.aperture.canonical_angle_deg == pytest.approx(angle, abs=ANGLE_TOL_DEG)
