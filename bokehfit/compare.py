@@ -16,18 +16,22 @@ from skimage import measure
 
 from bokehfit import __version__
 from bokehfit.discs import DiscSearch, find_discs
+from bokehfit.discs.measure import RESOLVABLE_PX
 from bokehfit.errors import InputError
 from bokehfit.fit import ApertureFit, fit_aperture
 from bokehfit.io import Photo, load_photo
 from bokehfit.kernels import Kernel, compute_kernel
 from bokehfit.metrics import METRICS, angle_error, compare_outlines
+from bokehfit.metrics.outlines import resample
 from bokehfit.optics import LENS_MODELS, SIZE_CONVENTIONS, circumscribed_fstop, fstop_from_coc, pixel_pitch_mm
 
 __all__ = ["SCHEMA_VERSION", "Geometry", "FStop", "Comparison", "compare_photo", "estimate_fstop", "judge", "resolve_geometry"]
 
 SCHEMA_VERSION = 1
-#: Samples of the matched kernel rendered on the GPU.
-KERNEL_SAMPLES = 2**22
+#: Samples of the matched kernel rendered on the GPU (its 50 % outline is what the metrics use).
+KERNEL_SAMPLES = 2**20
+#: Points each outline is resampled to (evenly along its length) before the metrics.
+METRIC_POINTS = 256
 #: A fit is acceptable when the discs match the kernel at least this well (median IoU) ...
 MIN_ACCEPTABLE_IOU = 0.6
 #: ... and sure when, besides a clear BIC margin, they match this well with at least MIN_SURE_DISCS discs.
@@ -215,7 +219,7 @@ def _kernel_outline(kernel: Kernel) -> np.ndarray:
     area_px = math.pi * kernel.diameter_px**2 / 4.0
     contours = measure.find_contours(np.pad(image, 1), 0.5 / area_px)
     longest = max(contours, key=len)
-    return longest[:, ::-1] - 1.0
+    return resample(longest[:, ::-1] - 1.0, METRIC_POINTS)
 
 
 def disc_metrics(comparison_fit: ApertureFit, kernel_outline: np.ndarray) -> dict[int, dict[str, float]]:
@@ -224,7 +228,9 @@ def disc_metrics(comparison_fit: ApertureFit, kernel_outline: np.ndarray) -> dic
     symmetry = comparison_fit.aperture.symmetry_deg
     seen = comparison_fit.candidates[0].angle_deg
     for item in comparison_fit.disc_fits:
-        values = compare_outlines(item.disc.outline_xy, kernel_outline, rotation_within_deg=ALIGNMENT_SEARCH_DEG)
+        values = compare_outlines(
+            resample(item.disc.outline_xy, METRIC_POINTS), kernel_outline, rotation_within_deg=ALIGNMENT_SEARCH_DEG
+        )
         fitted = item.fits[comparison_fit.family.name]
         if symmetry is not None and fitted.angle_deg is not None and seen is not None:
             values["angle_error_deg"] = angle_error(fitted.angle_deg, seen, symmetry)
@@ -243,7 +249,7 @@ def compare_photo(
     sensor_width_mm: float | None = None,
     focus_distance_m: float | None = None,
     light_distance_m: float = math.inf,
-    min_diameter_px: float = 4.0,
+    min_diameter_px: float = RESOLVABLE_PX,
     max_diameter_px: float = 500.0,
     progress=None,
 ) -> Comparison:

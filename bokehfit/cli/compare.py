@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 from bokehfit.compare import Comparison, compare_photo
+from bokehfit.discs.measure import RESOLVABLE_PX
 from bokehfit.errors import InputError, NoResultError, check_positive
 from bokehfit.fit import FOCUS_SIDES
 from bokehfit.optics import LENS_MODELS, SIZE_CONVENTIONS
@@ -41,7 +42,8 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--sensor-width-mm", type=float, help="the sensor's long side")
     parser.add_argument("--focus-distance-m", type=float)
     parser.add_argument("--light-distance-m", type=_distance, default=math.inf, help="a number or inf (default)")
-    parser.add_argument("--min-diameter-px", type=float, default=4.0)
+    parser.add_argument("--min-diameter-px", type=float, default=RESOLVABLE_PX,
+                        help=f"smallest disc sought (default {RESOLVABLE_PX:g}: smaller ones cannot show a shape)")
     parser.add_argument("--max-diameter-px", type=float, default=500.0)
     parser.set_defaults(run=run)
 

@@ -4,7 +4,7 @@ Notes
 -----
 Disc diameters are split into octave bands [s, 2s) with s = 4, 8, 16, … px.
 Band s is searched on a copy reduced by ``f = max(1, s / BAND_SIDE_PX)``
-(area averaging), so its discs are 8 to 16 px across there whatever their size,
+(area averaging), so its discs are 6 to 12 px across there whatever their size,
 and every band costs about the same. On that copy:
 
 - the background is a grey-scale morphological opening with a square wider
@@ -42,7 +42,7 @@ PEAK_SIGMA = 5.0
 MIN_CONTRAST_ABS = 0.003
 MIN_CONTRAST_REL = 0.15
 #: Smallest disc of a band, in pixels of the reduced copy it is searched on.
-BAND_SIDE_PX = 8.0
+BAND_SIDE_PX = 6.0
 #: Bands overlap by these factors, so that a disc at a band's edge, measured a
 #: little differently on the two reduced copies, is a candidate in at least one.
 BAND_OVERLAP_LOW = 0.8
@@ -62,9 +62,10 @@ class Candidate:
 
 
 def _label_maxima(values: np.ndarray, labels: np.ndarray, count: int) -> np.ndarray:
-    """Largest value under each label 0 … count − 1."""
+    """Largest value under each label 1 … count − 1 (label 0, the background, gets −∞)."""
     maxima = np.full(count, -np.inf, dtype=np.float32)
-    np.maximum.at(maxima, labels.ravel(), values.ravel())
+    inside = labels > 0  # blobs cover a small part of the image: visit only their pixels
+    np.maximum.at(maxima, labels[inside], values[inside])
     return maxima
 
 

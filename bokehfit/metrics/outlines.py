@@ -23,6 +23,7 @@ __all__ = [
     "perimeter",
     "normalise",
     "densify",
+    "resample",
     "rotate",
     "aperture_outline",
     "intersection_area",
@@ -156,6 +157,18 @@ def densify(outline: np.ndarray, points: int = DEFAULT_POINTS) -> np.ndarray:
     start = np.cumsum(pieces) - pieces
     fraction = (np.arange(int(np.sum(pieces))) - start[side]) / pieces[side]
     return outline[side] + fraction[:, None] * (q[side] - outline[side])
+
+
+def resample(outline: np.ndarray, points: int) -> np.ndarray:
+    """``points`` points evenly spaced along the closed outline (by arc length), from its first point.
+
+    Unlike :func:`densify` it also thins a dense outline, which bounds the cost
+    of the metrics on large discs.
+    """
+    closed = np.concatenate((outline, outline[:1]))
+    arc = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(closed, axis=0).T))))
+    at = np.linspace(0.0, arc[-1], points, endpoint=False)
+    return np.stack([np.interp(at, arc, closed[:, 0]), np.interp(at, arc, closed[:, 1])], axis=-1)
 
 
 def rotate(outline: np.ndarray, angle_deg: float) -> np.ndarray:
