@@ -28,8 +28,9 @@ from bokehfit.optics import LENS_MODELS, SIZE_CONVENTIONS, circumscribed_fstop, 
 __all__ = ["SCHEMA_VERSION", "Geometry", "FStop", "Comparison", "compare_photo", "estimate_fstop", "judge", "resolve_geometry"]
 
 SCHEMA_VERSION = 1
-#: Samples of the matched kernel rendered on the GPU (its 50 % outline is what the metrics use).
-KERNEL_SAMPLES = 2**20
+#: L1 tolerance of the matched kernel rendered on the GPU: its 50 % outline is
+#: what the metrics use, and the sample count follows from the convergence model.
+KERNEL_TOLERANCE = 0.01
 #: Points each outline is resampled to (evenly along its length) before the metrics.
 METRIC_POINTS = 256
 #: A fit is acceptable when the discs match the kernel at least this well (median IoU) ...
@@ -297,7 +298,7 @@ def compare_photo(
             fit.diameter_px,
             size,
             method="mc",
-            samples=KERNEL_SAMPLES,
+            tolerance=KERNEL_TOLERANCE,
             blades=aperture.blades if aperture.shape == "ngon" else None,
             aspect=aperture.aspect,
         )

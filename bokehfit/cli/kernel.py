@@ -22,7 +22,8 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--diameter-px", type=float, default=64.0, help="equal-area diameter of the disc (default 64)")
     parser.add_argument("--size", type=int, default=128, help="frame side in pixels (default 128)")
     parser.add_argument("--side", choices=SIDES, default="far", help="light behind (far) or before (near) the focus plane")
-    parser.add_argument("--method", choices=list(METHODS), default="exact")
+    parser.add_argument("--method", choices=list(METHODS), default=None, help="default exact, or with --tolerance the cheapest")
+    parser.add_argument("--tolerance", type=float, default=None, help="largest L1 error wanted: picks method and samples")
     parser.add_argument("--samples", type=int, default=None, help="point samples over the disc (mc, raster; default 2^22)")
     parser.add_argument("--sampling", choices=SAMPLINGS, default="stratified", help="mc sample pattern")
     parser.add_argument("--blades", type=int, default=None, help="blade count of an ngon")
@@ -46,11 +47,14 @@ def run(args: argparse.Namespace) -> Kernel:
         aspect=args.aspect,
         sampling=args.sampling,
         seed=args.seed,
+        tolerance=args.tolerance,
     )
     write_kernel_image(out, kernel.image)
     line = f"{kernel.aperture.describe()}, {kernel.diameter_px:g} px, {kernel.side}: method {kernel.method}"
     if kernel.samples is not None:
         line += f", {kernel.samples} samples"
+    if kernel.predicted_l1 is not None:
+        line += f" (tolerance {args.tolerance:g}: expected L1 {kernel.predicted_l1:.2g})"
     line += f", {kernel.time_s * 1000:.1f} ms"
     if kernel.setup_s > 0.01:
         line += f" (+{kernel.setup_s * 1000:.0f} ms start-up)"

@@ -21,6 +21,7 @@ A candidate is kept as a disc when all of these hold (the rejection reasons):
                     below ``MIN_CONTRAST_ABS`` (linear) or below
                     ``MIN_CONTRAST_REL`` of the background;
 ``no outline``      no 50 % contour around the centre;
+``no surround``     no background around it in the frame (it fills the frame);
 ``part of a larger region``  the outline, cut out of a bright region, lies
                     mostly on the cutting circle;
 ``soft edge``       the edge is wide for the size: the edge width, contrast over
@@ -102,11 +103,13 @@ class Measurement:
 
 
 
-def _annulus_levels(crop: np.ndarray, distance: np.ndarray, radius: float) -> tuple[float, float, float]:
+def _annulus_levels(crop: np.ndarray, distance: np.ndarray, radius: float) -> tuple[float, float, float] | None:
     """Median, robust spread and lift (median − 10th percentile) of the annulus 1.3 r … 1.7 r (+ 2 px)."""
     ring = crop[(distance >= 1.3 * radius + 1.0) & (distance <= 1.7 * radius + 3.0)]
     if ring.size < 8:
         ring = crop[distance >= 1.3 * radius + 1.0]
+    if ring.size < 8:
+        return None  # the window holds no surround: the disc fills or overflows the frame
     median = float(np.median(ring))
     low = float(np.percentile(ring, 10))
     return median, 1.4826 * float(np.median(np.abs(ring - median))), median - low
@@ -184,7 +187,10 @@ def _closed_outline(luminance, center_xy, radius, reach):
         window, distance = _window(luminance, center_xy, half)
         r0, c0, r1, c1 = window
         crop = luminance[r0:r1, c0:c1]
-        background, noise, ring_lift = _annulus_levels(crop, distance, radius)
+        levels = _annulus_levels(crop, distance, radius)
+        if levels is None:
+            return "no surround"
+        background, noise, ring_lift = levels
         core = crop[distance <= max(0.8 * radius, 0.75)]
         plateau = float(np.percentile(core, 90)) if core.size else background
         level = background + 0.5 * (plateau - background)

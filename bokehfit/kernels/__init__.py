@@ -26,6 +26,7 @@ import numpy as np
 
 from bokehfit.apertures import Aperture, make_aperture
 from bokehfit.errors import InputError, check_positive
+from bokehfit.kernels.accuracy import plan_kernel
 from bokehfit.kernels.exact import coverage, quadrant_area
 
 __all__ = ["METHODS", "SAMPLINGS", "SIDES", "Kernel", "KernelMethod", "KernelClippedWarning", "compute_kernel", "render_kernel"]
@@ -58,6 +59,7 @@ class Kernel:
     setup_s: float  #: one-time start-up before it (adapter, context, shader compilation)
     device: str | None  #: adapter or GL renderer (None for exact)
     clipped_fraction: float  #: share of the disc's light outside the frame
+    predicted_l1: float | None = None  #: expected L1 against exact, when planned from a tolerance
 
 
 @dataclass(frozen=True)
@@ -136,12 +138,13 @@ def compute_kernel(
     size: int,
     *,
     side: str = "far",
-    method: str = "exact",
+    method: str | None = None,
     samples: int | None = None,
     blades: int | None = None,
     aspect: float | None = None,
     sampling: str = "stratified",
     seed: int = 0,
+    tolerance: float | None = None,
 ) -> Kernel:
     """Render a kernel and report how: see :func:`render_kernel` for the parameters."""
     aperture = make_aperture(shape, angle_deg, blades=blades, aspect=aspect)
@@ -151,8 +154,15 @@ def compute_kernel(
     size = _check_size(size)
     if side not in SIDES:
         raise InputError(f"side must be one of {', '.join(SIDES)} (got {side!r})")
-    if method not in METHODS:
+    if method is not None and method not in METHODS:
         raise InputError(f"method must be one of {', '.join(METHODS)} (got {method!r})")
+    predicted = None
+    if tolerance is not None:
+        if samples is not None:
+            raise InputError("give samples or tolerance, not both")
+        plan = plan_kernel(aperture, diameter_px, size, tolerance, method)
+        method, samples, sampling, predicted = plan.method, plan.samples, plan.sampling, plan.predicted_l1
+    method = method or "exact"
     if sampling not in SAMPLINGS:
         raise InputError(f"sampling must be one of {', '.join(SAMPLINGS)} (got {sampling!r})")
     if samples is None:
@@ -184,7 +194,7 @@ def compute_kernel(
             stacklevel=3,
         )
     image = (counts / total).astype(np.float32)
-    return Kernel(image, aperture, diameter_px, side, method, drawn, elapsed, prepared - start, device, clipped)
+    return Kernel(image, aperture, diameter_px, side, method, drawn, elapsed, prepared - start, device, clipped, predicted)
 
 
 def render_kernel(
@@ -194,12 +204,13 @@ def render_kernel(
     size: int,
     *,
     side: str = "far",
-    method: str = "exact",
+    method: str | None = None,
     samples: int | None = None,
     blades: int | None = None,
     aspect: float | None = None,
     sampling: str = "stratified",
     seed: int = 0,
+    tolerance: float | None = None,
 ) -> np.ndarray:
     """Point-light defocus kernel: float32 (size, size), summing to 1.
 
@@ -217,8 +228,9 @@ def render_kernel(
     side : {"far", "near"}
         A light behind the focus plane shows the aperture upright; one in front
         shows it rotated by 180°.
-    method : {"exact", "mc", "raster"}
-        See the module docstring.
+    method : {"exact", "mc", "raster"}, optional
+        See the module docstring. Default ``exact``; with ``tolerance`` and no
+        method, the cheapest method that meets the tolerance.
     samples : int, optional
         Point samples over the disc for ``mc`` and ``raster`` (default 2²²).
     blades, aspect : optional
@@ -227,6 +239,10 @@ def render_kernel(
         Sample pattern of ``mc`` (``raster`` is always stratified).
     seed : int
         Random seed; the same seed gives the same kernel.
+    tolerance : float, optional
+        Largest L1 error against ``exact`` wanted: the method (unless given)
+        and the sample count are chosen from the measured convergence models
+        (:mod:`bokehfit.kernels.accuracy`) to meet it at the least cost.
 
     Returns
     -------
@@ -258,4 +274,5 @@ def render_kernel(
         aspect=aspect,
         sampling=sampling,
         seed=seed,
+        tolerance=tolerance,
     ).image
