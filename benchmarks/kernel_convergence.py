@@ -1,38 +1,27 @@
-"""Kernel error against time: L1 distance to ``exact`` for ``mc`` and ``raster``.
+"""Kernel error against time for one kernel: a thin wrapper over :mod:`bokehfit.bench.kernels`.
 
 Usage::
 
-    python benchmarks/kernel_convergence.py [--shape hexagon] [--diameter-px 64] [--size 128]
+    python benchmarks/kernel_convergence.py [--shape hexagon] [--angle 20] [--diameter-px 64] [--size 128]
         [--samples 1e4,1e5,1e6,1e7] [--repeats 3] [--json out.json]
 
-For every sample count it renders the kernel with each sampling method (after
-one warm-up call, so pipeline compilation is not timed), reports the best of
-``--repeats`` wall times and the L1 error, and fits the convergence rate
-(slope of log L1 against log samples). All figures come from one run on one
-machine, so ratios between methods are comparable.
+Every kernel method (exact; mc with independent and stratified samples; raster)
+renders the kernel at each sample count, after one warm-up render per method;
+the table gives L1 to the exact reference and ``Kernel.time_s`` (the fastest of
+``--repeats`` runs for points under 0.2 s), and the fitted convergence rates.
+No count is skipped here (the whole-suite command ``bokehfit bench`` runs every
+shape and size with a time cut-off; see :mod:`bokehfit.bench.kernels`).
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import math
-import time
+from pathlib import Path
 
-import numpy as np
-
-from bokehfit.kernels import compute_kernel
-
-VARIANTS = (("mc", "stratified"), ("mc", "independent"), ("raster", "stratified"))
-
-
-def measure(shape, angle, diameter, size, method, sampling, samples, repeats):
-    best = math.inf
-    for _ in range(repeats):
-        start = time.perf_counter()
-        kernel = compute_kernel(shape, angle, diameter, size, method=method, samples=samples, sampling=sampling, seed=7)
-        best = min(best, time.perf_counter() - start)
-    return kernel, best
+from bokehfit.bench.kernels import kernel_sweep
+from bokehfit.bench.report import kernel_table, markdown_table
+from bokehfit.outputs import check_output_path, write_json
 
 
 def main() -> None:
@@ -40,44 +29,27 @@ def main() -> None:
     parser.add_argument("--shape", default="hexagon")
     parser.add_argument("--angle", type=float, default=20.0)
     parser.add_argument("--diameter-px", type=float, default=64.0)
-    parser.add_argument("--size", type=int, default=128)
+    parser.add_argument("--size", type=int, default=None, help="frame side (default: 1.25 × the outline + margin)")
     parser.add_argument("--samples", default="1e4,1e5,1e6,1e7")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--json", help="write the rows as JSON here")
     args = parser.parse_args()
     counts = [int(float(s)) for s in args.samples.split(",")]
+    out = check_output_path(args.json, (".json",)) if args.json else None
 
-    start = time.perf_counter()
-    exact = compute_kernel(args.shape, args.angle, args.diameter_px, args.size, method="exact")
-    exact_time = time.perf_counter() - start
-    rows = []
-    devices = {}
-    for method, sampling in VARIANTS:
-        compute_kernel(args.shape, args.angle, args.diameter_px, args.size, method=method, samples=1000)  # warm-up
-        for samples in counts:
-            kernel, seconds = measure(
-                args.shape, args.angle, args.diameter_px, args.size, method, sampling, samples, args.repeats
-            )
-            devices[method] = kernel.device
-            l1 = float(np.abs(kernel.image.astype(np.float64) - exact.image).sum())
-            rows.append(dict(method=method, sampling=sampling, samples=kernel.samples, time_s=seconds, l1=l1))
-
-    print(f"{args.shape} {args.angle:g}°, {args.diameter_px:g} px in {args.size}×{args.size}; exact: {exact_time * 1e3:.2f} ms")
-    for method, device in devices.items():
-        print(f"  {method}: {device}")
-    print(f"{'method':<8}{'sampling':<13}{'samples':>12}{'time ms':>11}{'L1':>12}")
-    for row in rows:
-        print(f"{row['method']:<8}{row['sampling']:<13}{row['samples']:>12}{row['time_s'] * 1e3:>11.2f}{row['l1']:>12.3e}")
-    rates = {}
-    for method, sampling in VARIANTS:
-        chosen = [r for r in rows if r["method"] == method and r["sampling"] == sampling]
-        slope = np.polyfit(np.log([r["samples"] for r in chosen]), np.log([r["l1"] for r in chosen]), 1)[0]
-        rates[f"{method}/{sampling}"] = float(slope)
-        print(f"convergence {method}/{sampling}: L1 ∝ N^{slope:.2f}")
-    if args.json:
-        with open(args.json, "w") as f:
-            json.dump(dict(shape=args.shape, diameter_px=args.diameter_px, size=args.size, exact_time_s=exact_time,
-                           devices=devices, rows=rows, rates=rates), f, indent=1)
+    sweep = kernel_sweep([args.shape], [args.diameter_px], counts, angle_deg=args.angle, size=args.size,
+                         repeats=args.repeats, max_point_s=math.inf)
+    result = {"settings": {"samples": sorted(set(counts)), "angle_deg": args.angle}, "kernel": sweep["rows"],
+              "rates": sweep["rates"], "kernel_skipped": sweep["skipped"]}
+    for method, device in sweep["devices"].items():
+        print(f"{method}: {device or 'CPU'}")
+    print("cells: L1 to exact (render time, ms)")
+    print(markdown_table(*kernel_table(result), left=4))
+    for note in sweep["notes"]:
+        print(f"note: {note}")
+    if out:
+        write_json(Path(out), {"shape": args.shape, "angle_deg": args.angle, "diameter_px": args.diameter_px, **sweep})
+        print(f"wrote {out}")
 
 
 if __name__ == "__main__":

@@ -1,0 +1,82 @@
+"""``bokehfit bench``: speed against error for kernels, fit and compare; tables, JSON and HTML."""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+
+from bokehfit.outputs import check_output_path, write_bytes_atomic, write_json
+
+__all__ = ["add_parser", "run"]
+
+
+def add_parser(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "bench",
+        help="measure speed against error: kernel methods, the fit, compare on a 24-MP photo",
+        description=(
+            "One run that measures, side by side: (a) kernel error (L1 to exact) against render time for "
+            "every kernel method from 1e3 to 1e8 samples, with convergence rates; (b) fit error against "
+            "fit time on a fixed synthetic set; (c) compare on a 24-MP JPEG, its time by stage."
+        ),
+    )
+    parser.add_argument("--quick", action="store_true",
+                        help="the CI size: samples 1e3-1e6 at 64 px, a 2-photo fit set, a 4-MP photo (under a minute)")
+    parser.add_argument("--json", metavar="OUT.json", help="write every figure as JSON (schema_version 1)")
+    parser.add_argument("--html", metavar="OUT.html", help="write the report with its plots as one HTML page")
+    parser.set_defaults(run=run)
+
+
+class _Progress:
+    """One progress bar over every step, on stderr when it is a terminal (else nothing)."""
+
+    def __init__(self):
+        self.bar = None
+        if sys.stderr.isatty():
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=1, desc="bench", unit="step", leave=False, file=sys.stderr)
+
+    def __call__(self, done: int, total: int, what: str) -> None:
+        if self.bar is None:
+            return
+        self.bar.total = total
+        self.bar.n = done
+        self.bar.set_description(f"bench: {what}", refresh=False)
+        self.bar.refresh()
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+
+
+def _command_line(args: argparse.Namespace) -> str:
+    words = ["bokehfit", "bench"]
+    if args.quick:
+        words.append("--quick")
+    for flag in ("json", "html"):
+        if getattr(args, flag):
+            words += [f"--{flag}", getattr(args, flag)]
+    return shlex.join(words)
+
+
+def run(args: argparse.Namespace) -> dict:
+    json_path = check_output_path(args.json, (".json",)) if args.json else None
+    html_path = check_output_path(args.html, (".html",)) if args.html else None
+    from bokehfit.bench import run_bench
+    from bokehfit.bench.report import build_html, format_tables
+
+    progress = _Progress()
+    try:
+        result = run_bench(args.quick, progress=progress, command_line=_command_line(args))
+    finally:
+        progress.close()
+    print(format_tables(result))
+    if json_path:
+        write_json(json_path, result)
+        print(f"wrote {json_path}")
+    if html_path:
+        write_bytes_atomic(html_path, build_html(result).encode("utf-8"))
+        print(f"wrote {html_path}")
+    return result
