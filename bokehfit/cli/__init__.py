@@ -15,12 +15,12 @@ import sys
 import warnings
 
 from bokehfit import __version__
-from bokehfit.cli import bench, compare, discs, kernel, similarity
+from bokehfit.cli import bench, compare, discs, kernel, render, similarity, view
 from bokehfit.errors import BokehfitError
 
 __all__ = ["main", "entry_point", "build_parser"]
 
-SUBCOMMANDS = (bench, compare, discs, kernel, similarity)
+SUBCOMMANDS = (bench, compare, discs, kernel, render, similarity, view)
 
 
 class _Parser(argparse.ArgumentParser):

@@ -1,0 +1,64 @@
+"""``bokehfit view``: serve the interactive viewer on 127.0.0.1 and open it in the browser."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import threading
+import webbrowser
+from dataclasses import dataclass
+
+from bokehfit.cli.render import parse_size
+
+__all__ = ["ViewSession", "add_parser", "run"]
+
+
+@dataclass(frozen=True)
+class ViewSession:
+    """What ``bokehfit view`` served, once it stopped."""
+
+    url: str
+    browser_requested: bool
+
+
+def add_parser(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "view",
+        help="path-trace the Cornell box interactively in the browser (WebGPU)",
+        description=(
+            "Serve a local page (127.0.0.1 only) that path-traces the Cornell box progressively in the "
+            "browser through WebGPU, with the same WGSL as `bokehfit render`, beside a top-down sketch "
+            "of the box with the focus plane and the depth of field. Hover the page's top-left corner "
+            "for edit mode: focus, f-stop, shape, angle, blades or aspect, a `bokehfit compare --json` "
+            "result's fitted aperture, and PNG export. Ctrl-C stops the server."
+        ),
+    )
+    parser.add_argument("--port", type=int, default=0, help="port to listen on (default 0: any free port)")
+    parser.add_argument("--no-browser", action="store_true", help="print the URL but do not open a browser")
+    parser.add_argument("--size", default="512x512", metavar="WxH", help="render size in pixels (default 512x512)")
+    parser.add_argument("--verbose", action="store_true", help="log every request to stderr")
+    parser.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> ViewSession:
+    from bokehfit.view import ViewerServer
+
+    width, height = parse_size(args.size)
+    server = ViewerServer(args.port, size=(width, height), verbose=args.verbose)
+    url = server.url
+    print(f"bokehfit view: serving {url} (Ctrl-C stops)", flush=True)
+    if not args.no_browser:
+        # In a thread: a console browser (www-browser) would otherwise hold up the server.
+        threading.Thread(target=_open_browser, args=(url,), name="bokehfit-view-browser", daemon=True).start()
+    try:
+        server.serve_forever()
+    except KeyboardInterrupt:
+        print("\nbokehfit view: stopped", flush=True)
+    finally:
+        server.close()
+    return ViewSession(url, not args.no_browser)
+
+
+def _open_browser(url: str) -> None:
+    if not webbrowser.open(url):
+        print("bokehfit view: no browser could be opened: open the URL above", file=sys.stderr)

@@ -1,0 +1,33 @@
+"""The interactive viewer: ``bokehfit view`` serves a page that path-traces the Cornell box in the browser.
+
+The page (``static/``: index.html, viewer.js, style.css) runs the package's own
+WGSL path tracer through WebGPU, progressively, and draws a top-down sketch of
+the box with the camera, the focus plane and the depth of field. The server
+(:mod:`bokehfit.view.server`) hands it the shader with its includes resolved,
+the uniform layout and every uniform value, all computed by the Python
+renderer's code, so the browser and ``bokehfit render`` trace the same paths.
+"""
+
+from bokehfit.view.server import (
+    COC_DIVISOR,
+    DepthOfField,
+    ViewerServer,
+    depth_of_field,
+    pathtrace_source,
+    settings_from_compare,
+    uniform_layout,
+    uniform_values,
+    viewer_config,
+)
+
+__all__ = [
+    "COC_DIVISOR",
+    "DepthOfField",
+    "ViewerServer",
+    "depth_of_field",
+    "pathtrace_source",
+    "settings_from_compare",
+    "uniform_layout",
+    "uniform_values",
+    "viewer_config",
+]

@@ -1,0 +1,547 @@
+"""``bokehfit view``: the server's shader, layout and parameters, and the page in headless Chromium.
+
+The browser tests drive Debian's chromium (``/usr/bin/chromium``, or
+``$BOKEHFIT_CHROMIUM``) through Playwright, headless, with WebGPU on
+SwiftShader (``--enable-unsafe-webgpu``), against a server started in a thread
+on a free port. Renders are tiny (128×128 at most, but for the one speed
+measurement at 512×512) so that SwiftShader on two cores keeps up. Where
+chromium or playwright is missing the browser tests skip and say why; under
+CI=true they fail instead. Screenshots of both modes are kept in a temporary
+folder (printed; ``$BOKEHFIT_TEST_ARTIFACTS`` names another).
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+import os
+import re
+import signal
+import struct
+import subprocess
+import sys
+import time
+import urllib.error
+import urllib.request
+import zlib
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from bokehfit.apertures import SHAPES, make_aperture
+from bokehfit.errors import InputError
+from bokehfit.gpu.shaders import shader_source
+from bokehfit.scene import cornell_box, make_lens
+from bokehfit.scene.renderer import RENDER_PARAMS
+from bokehfit.scene.wgsl import scene_wgsl
+from bokehfit.view import ViewerServer, depth_of_field, settings_from_compare
+
+CHROMIUM = Path(os.environ.get("BOKEHFIT_CHROMIUM", "/usr/bin/chromium"))
+CHROMIUM_ARGS = [
+    "--enable-unsafe-webgpu",
+    "--no-sandbox",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--no-first-run",
+]
+#: Image size of the page in the browser tests.
+SMALL = "128x128"
+#: Longest wait for the page to compile the path tracer and finish a few samples (s).
+PAGE_TIMEOUT_MS = 60_000
+#: The browser's frame and the Python renderer's (lavapipe) trace the same paths; f32
+#: rounding differs (SwiftShader's and llvmpipe's pow, sqrt, trigonometry), which sends a
+#: few paths elsewhere, so most pixels agree to float precision and some do not.
+SAME_PIXEL_TOLERANCE = 1e-4
+MIN_SAME_PIXEL_FRACTION = 0.7
+#: The 512×512 speed measurement runs this long (s).
+SPEED_SECONDS = 6.0
+
+
+# --- the server, without a browser --------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def server():
+    with ViewerServer(0).start() as running:
+        yield running
+
+
+def get(server, path, host=None):
+    request = urllib.request.Request(server.url.rstrip("/") + path)
+    if host is not None:
+        request.add_header("Host", host)
+    try:
+        with urllib.request.urlopen(request, timeout=30) as response:
+            return response.status, response.headers.get("Content-Type"), response.read()
+    except urllib.error.HTTPError as error:
+        with error:
+            return error.code, error.headers.get("Content-Type"), error.read()
+
+
+def post(server, path, body: bytes):
+    request = urllib.request.Request(server.url.rstrip("/") + path, data=body, method="POST", headers={"Content-Type": "application/json"})
+    try:
+        with urllib.request.urlopen(request, timeout=30) as response:
+            return response.status, json.loads(response.read())
+    except urllib.error.HTTPError as error:
+        with error:
+            return error.code, json.loads(error.read())
+
+
+def test_server_listens_on_loopback_only(server):
+    assert server.url.startswith("http://127.0.0.1:") and server.port > 0
+    assert server._httpd.server_address[0] == "127.0.0.1"
+
+
+def test_uniform_layout_is_render_params(server):
+    status, kind, body = get(server, "/config.json")
+    assert status == 200 and kind.startswith("application/json")
+    config = json.loads(body)
+    layout = config["uniform"]
+    assert [(f["name"], f["type"]) for f in layout["fields"]] == list(RENDER_PARAMS.fields)
+    assert [f["offset"] for f in layout["fields"]] == [4 * i for i in range(len(RENDER_PARAMS.fields))]
+    assert layout["size_bytes"] == RENDER_PARAMS.dtype.itemsize
+    assert layout["wgsl"] == RENDER_PARAMS.wgsl()
+    assert config["shader"]["entry_point"] == "main" and config["shader"]["workgroup_size"] == [8, 8, 1]
+    assert [s["name"] for s in config["shapes"]] == list(SHAPES)
+
+
+def test_shader_is_the_package_wgsl_with_includes_resolved(server):
+    status, kind, body = get(server, "/pathtrace.wgsl")
+    assert status == 200 and kind.startswith("text/wgsl")
+    source = body.decode("utf-8")
+    assert "#include" not in source
+    for name in ("rng.wgsl", "apertures.wgsl", "camera.wgsl", "scene.wgsl"):
+        body_lines = [line for line in shader_source(name).splitlines() if "#include" not in line]
+        assert "\n".join(body_lines) in source, f"{name} is not in the served shader verbatim"
+    assert RENDER_PARAMS.wgsl() in source
+    assert scene_wgsl(cornell_box()) in source
+    assert source.count("fn camera_ray(") == 1 and source.count("struct RenderParams") == 1
+
+
+def f32(value) -> float:
+    return float(np.float32(value))
+
+
+def test_params_are_the_lens_values(server):
+    status, _, body = get(server, "/params.json?shape=ngon&blades=7&angle=100&fstop=2&focus=0.9&width=96&height=64")
+    assert status == 200
+    answer = json.loads(body)
+    values = answer["values"]
+    assert set(values) == {name for name, _ in RENDER_PARAMS.fields}
+    lens = make_lens("ngon", 100.0, fstop=2.0, focus_distance_m=0.9, blades=7)
+    assert values["shape"] == SHAPES["ngon"].shader_id and values["blades"] == 7
+    assert values["aperture_scale"] == f32(lens.aperture_scale_m)
+    assert values["focus_distance"] == f32(0.9)
+    assert values["cos_angle"] == f32(math.cos(math.radians(100))) and values["sin_angle"] == f32(math.sin(math.radians(100)))
+    assert (values["tan_half_x"], values["tan_half_y"]) == tuple(f32(t) for t in lens.tan_half_fov(96, 64))
+    assert (values["tile_x"], values["tile_y"], values["tile_width"], values["tile_height"]) == (0, 0, 96, 64)
+    assert values["sample_index"] == 0
+    assert answer["describe"] == lens.describe()
+    assert answer["symmetry_deg"] == pytest.approx(360 / 7)
+
+
+@pytest.mark.parametrize(
+    "query,needle",
+    [("shape=hexgon", "shape must be one of"), ("fstop=0", "fstop"), ("focus=nan", "focus"), ("shape=ngon&blades=2", "blades"), ("width=0", "width")],
+)
+def test_bad_params_answer_400_naming_the_parameter(server, query, needle):
+    status, _, body = get(server, f"/params.json?{query}")
+    assert status == 400 and needle in json.loads(body)["error"]
+
+
+def test_unknown_paths_and_hosts_are_refused(server):
+    assert get(server, "/../pyproject.toml")[0] == 404
+    assert get(server, "/secret")[0] == 404
+    status, _, body = get(server, "/config.json", host=f"evil.example:{server.port}")
+    assert status == 403 and "Host" in json.loads(body)["error"]
+    status, kind, body = get(server, "/")
+    assert status == 200 and kind.startswith("text/html") and b'id="render"' in body
+
+
+def test_depth_of_field_limits_blur_by_the_criterion():
+    lens = make_lens("circle", fstop=2.8, focus_distance_m=0.7)
+    dof = depth_of_field(lens, 512, 512)
+    assert dof.coc_mm == pytest.approx(math.hypot(36.0, 36.0) / 1500)
+    assert dof.near_m < 0.7 < dof.far_m
+    assert lens.coc_mm(dof.near_m) == pytest.approx(dof.coc_mm)
+    assert lens.coc_mm(dof.far_m) == pytest.approx(dof.coc_mm)
+    assert lens.coc_mm(math.inf) == pytest.approx(dof.coc_mm * dof.hyperfocal_m / 0.7)
+    beyond = depth_of_field(make_lens("circle", fstop=16, focus_distance_m=5.0), 512, 512)
+    assert beyond.far_m == math.inf and beyond.to_json()["far_m"] is None
+
+
+def compare_document(**aperture) -> dict:
+    base = {"shape": "hexagon", "blades": 6, "aspect": None, "angle_deg": 15.0, "fstop": 2.0, "focus_side": "far", "size_convention": "equal-area"}
+    return {"schema_version": 1, "aperture": {**base, **aperture}}
+
+
+def test_settings_from_compare():
+    m = settings_from_compare(compare_document())
+    assert (m["shape"], m["angle_deg"], m["blades"], m["aspect"], m["fstop"]) == ("hexagon", 15.0, None, None, 2.0)
+    m = settings_from_compare(compare_document(shape="ngon", blades=9, angle_deg=3.0, fstop=None, fstop_reason="no EXIF"))
+    assert (m["shape"], m["blades"], m["fstop"]) == ("ngon", 9, None) and "no EXIF" in m["notes"]
+    m = settings_from_compare(compare_document(shape="slit", blades=None, aspect=0.4, angle_deg=30.0))
+    assert (m["shape"], m["aspect"]) == ("slit", 0.4)
+    m = settings_from_compare(compare_document(shape="circle", blades=None, angle_deg=None))
+    assert m["angle_deg"] == 0.0
+    m = settings_from_compare(compare_document(size_convention="circumscribed", fstop=2.0))
+    assert m["fstop"] == pytest.approx(2.0 * make_aperture("hexagon").extent() * math.sqrt(math.pi))
+    m = settings_from_compare(compare_document(shape="triangle", blades=3, focus_side="unknown"))
+    assert any("modulo" in note for note in m["notes"])
+
+
+@pytest.mark.parametrize(
+    "document,needle",
+    [
+        ({"discs": []}, "no 'aperture'"),
+        ({"schema_version": 2, "aperture": {"shape": "circle"}}, "schema_version"),
+        ({"aperture": {"shape": None}}, "fitted no aperture"),
+        ({"aperture": {"shape": "hexgon"}}, "shape must be one of"),
+        ({"aperture": {"shape": "ngon", "blades": 99}}, "blades"),
+    ],
+)
+def test_settings_from_compare_refuses(document, needle):
+    with pytest.raises(InputError, match=needle):
+        settings_from_compare(document)
+
+
+def test_matched_endpoint(server):
+    status, answer = post(server, "/matched", json.dumps(compare_document(shape="pentagon", blades=5, angle_deg=7.5)).encode())
+    assert status == 200 and answer["shape"] == "pentagon" and answer["angle_deg"] == 7.5
+    status, answer = post(server, "/matched", b"{not json")
+    assert status == 400 and "not JSON" in answer["error"]
+
+
+def test_cli_serves_until_ctrl_c(tmp_path):
+    process = subprocess.Popen(
+        [sys.executable, "-m", "bokehfit", "view", "--no-browser", "--port", "0", "--size", "64x48"],
+        cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )
+    try:
+        line = process.stdout.readline()
+        match = re.search(r"http://127\.0\.0\.1:(\d+)/", line)
+        assert match, f"no URL in {line!r}; stderr: {process.stderr.read() if process.poll() is not None else ''}"
+        with urllib.request.urlopen(match.group(0) + "config.json", timeout=30) as response:
+            assert json.loads(response.read())["defaults"]["width"] == 64
+        process.send_signal(signal.SIGINT)
+        out, err = process.communicate(timeout=30)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.communicate()
+    assert process.returncode == 0, err
+    assert "stopped" in out and "Traceback" not in err
+
+
+def test_cli_refuses_a_bad_port(tmp_path):
+    done = subprocess.run(
+        [sys.executable, "-m", "bokehfit", "view", "--no-browser", "--port", "70000"], cwd=tmp_path, capture_output=True, text=True, timeout=60, check=False
+    )
+    assert done.returncode == 2 and "port" in done.stderr and "Traceback" not in done.stderr
+
+
+# --- the page in headless Chromium --------------------------------------------------------
+
+
+def _need(reason: str):
+    if os.environ.get("CI") == "true":
+        pytest.fail(f"CI=true but {reason}", pytrace=False)
+    pytest.skip(reason)
+
+
+@pytest.fixture(scope="module")
+def browser(tmp_path_factory):
+    """A headless Chromium with WebGPU (SwiftShader) and a fresh profile."""
+    try:
+        from playwright.sync_api import sync_playwright
+    except ImportError:
+        _need("playwright is not installed (pip install 'bokehfit[test]')")
+    if not CHROMIUM.is_file():
+        _need(f"no chromium at {CHROMIUM} (apt-get install chromium, or set BOKEHFIT_CHROMIUM)")
+    playwright = sync_playwright().start()
+    try:
+        context = playwright.chromium.launch_persistent_context(
+            str(tmp_path_factory.mktemp("chromium_profile")),
+            executable_path=str(CHROMIUM),
+            headless=True,
+            args=CHROMIUM_ARGS,
+            viewport={"width": 1320, "height": 720},
+            accept_downloads=True,
+        )
+        try:
+            yield context
+        finally:
+            context.close()
+    finally:
+        playwright.stop()
+
+
+@pytest.fixture(scope="module")
+def artifacts(tmp_path_factory):
+    folder = os.environ.get("BOKEHFIT_TEST_ARTIFACTS")
+    path = Path(folder) if folder else tmp_path_factory.mktemp("view_artifacts")
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def open_page(browser, server, options: str = ""):
+    """A page of the viewer at ``options`` (URL query), its path tracer compiled."""
+    page = browser.new_page()
+    errors = []
+    page.on("pageerror", lambda error: errors.append(str(error)))
+    page.goto(f"{server.url}?size={SMALL}&{options}")
+    page.wait_for_function("document.body.dataset.ready === 'true'", timeout=PAGE_TIMEOUT_MS)
+    webgpu = page.evaluate("document.body.dataset.webgpu")
+    if webgpu != "ok":
+        reason = page.text_content("#no-webgpu-reason") or page.text_content("#message")
+        page.close()
+        _need(f"headless chromium has no usable WebGPU here ({webgpu}: {reason})")
+    page.errors = errors
+    return page
+
+
+def spp(page) -> int:
+    return int(page.text_content("#spp"))
+
+
+def wait_spp(page, at_least: int):
+    page.wait_for_function(f"window.bokehfitViewer.spp >= {at_least}", timeout=PAGE_TIMEOUT_MS)
+
+
+def pixels(png: bytes) -> np.ndarray:
+    return np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=np.float64)
+
+
+def save_screenshot(page, artifacts: Path, name: str) -> np.ndarray:
+    path = artifacts / name
+    page.screenshot(path=str(path))
+    print(f"screenshot: {path}")
+    image = pixels(path.read_bytes())
+    assert image.var() > 0, f"{path} is blank"
+    return image
+
+
+def render_pixels(page) -> np.ndarray:
+    image = pixels(page.locator("#render").screenshot())
+    assert image.var() > 0, "the render is blank"
+    return image
+
+
+CONTROLS = ("#focus-distance", "#fstop", "#shape", "#angle")
+
+
+def test_view_mode_renders_progressively_without_controls(browser, server, artifacts):
+    page = open_page(browser, server)
+    try:
+        assert page.evaluate("document.body.dataset.mode") == "view"
+        wait_spp(page, 1)
+        first = spp(page)
+        page.wait_for_function(f"Number(document.getElementById('spp').textContent) > {first}", timeout=PAGE_TIMEOUT_MS)
+        for selector in CONTROLS:
+            assert not page.is_visible(selector), f"{selector} is visible in view mode"
+        assert page.evaluate("getComputedStyle(document.getElementById('mode-toggle')).opacity") == "0"
+        assert "circle, f/2.8, focus 0.7 m" in page.text_content("#settings")
+        assert "sensor diagonal / 1500" in page.text_content("#dof-text")
+        save_screenshot(page, artifacts, "viewer_view_mode.png")
+        render_pixels(page)
+        assert page.errors == []
+    finally:
+        page.close()
+
+
+def test_corner_toggle_reveals_the_controls(browser, server, artifacts):
+    page = open_page(browser, server, "shape=hexagon&angle=15")
+    try:
+        page.hover("#corner")
+        page.wait_for_function("getComputedStyle(document.getElementById('mode-toggle')).opacity === '1'")
+        page.click("#mode-toggle")
+        assert page.evaluate("document.body.dataset.mode") == "edit"
+        for selector in CONTROLS:
+            assert page.is_visible(selector), f"{selector} is hidden in edit mode"
+        assert not page.is_visible("#blades") and not page.is_visible("#aspect")
+        options = page.eval_on_selector_all("#shape option", "options => options.map(o => o.value)")
+        assert options == list(SHAPES)
+        page.select_option("#shape", "ngon")
+        assert page.is_visible("#blades") and not page.is_visible("#aspect")
+        page.select_option("#shape", "slit")
+        assert page.is_visible("#aspect") and not page.is_visible("#blades")
+        wait_spp(page, 2)
+        save_screenshot(page, artifacts, "viewer_edit_mode.png")
+        page.click("#mode-toggle")
+        assert page.evaluate("document.body.dataset.mode") == "view"
+        assert not page.is_visible("#shape")
+        assert page.errors == []
+    finally:
+        page.close()
+
+
+def test_click_in_topdown_sets_focus_and_restarts(browser, server):
+    page = open_page(browser, server)
+    try:
+        wait_spp(page, 4)
+        box = page.locator("#topdown").bounding_box()
+        restarts = page.evaluate("window.bokehfitViewer.restarts")
+        page.mouse.click(box["x"] + box["width"] / 2, box["y"] + 0.5 * box["height"])  # view mode: nothing happens
+        assert page.evaluate("window.bokehfitViewer.restarts") == restarts
+        page.keyboard.press("e")
+        assert page.evaluate("document.body.dataset.mode") == "edit"
+
+        focus = []
+        for fraction in (0.3, 0.6):
+            wait_spp(page, 4)
+            before = spp(page)
+            restarts = page.evaluate("window.bokehfitViewer.restarts")
+            page.mouse.click(box["x"] + box["width"] / 2, box["y"] + fraction * box["height"])
+            after = page.wait_for_function(
+                f"window.bokehfitViewer.restarts > {restarts} ? {{spp: window.bokehfitViewer.spp}} : null", timeout=PAGE_TIMEOUT_MS
+            ).json_value()
+            assert after["spp"] < before, "accumulation did not restart"
+            state = page.evaluate("window.bokehfitViewer.state")
+            assert float(page.input_value("#focus-distance")) == pytest.approx(state["focus_distance_m"], abs=0.005)
+            assert f"{state['focus_distance_m']:.3f} m" in page.text_content("#focus-distance-out")
+            focus.append(state["focus_distance_m"])
+        assert focus[0] > focus[1] > 0.0, "a click higher up the sketch must focus deeper"
+        assert focus[1] != 0.7
+        assert page.errors == []
+    finally:
+        page.close()
+
+
+def test_shape_changes_the_render_and_nothing_else_does(browser, server):
+    page = open_page(browser, server, "max_spp=4&mode=edit&fstop=1.4")
+    try:
+        def settle():
+            page.wait_for_function("window.bokehfitViewer.spp === 4 && document.getElementById('rate').textContent.includes('done')", timeout=PAGE_TIMEOUT_MS)
+            return render_pixels(page)
+
+        circle = settle()
+        restarts = page.evaluate("window.bokehfitViewer.restarts")
+        page.select_option("#shape", "slit")
+        page.wait_for_function(f"window.bokehfitViewer.restarts > {restarts}")
+        slit = settle()
+        page.select_option("#shape", "circle")
+        page.wait_for_function(f"window.bokehfitViewer.restarts > {restarts + 1}")
+        again = settle()
+        assert np.abs(again - circle).mean() < 0.05, "the same settings must give the same frame"
+        assert np.abs(slit - circle).mean() > 1.0, "the shape did not change the render"
+        assert page.errors == []
+    finally:
+        page.close()
+
+
+def test_browser_traces_the_same_paths_as_python(browser, server, gpu):
+    """The page's linear frame against ``bokehfit.scene.render`` on lavapipe: same shader, same uniforms."""
+    from bokehfit.scene import render
+
+    settings = {"shape": "ngon", "blades": 7, "angle_deg": 10.0, "fstop": 1.4}
+    page = open_page(browser, server, "max_spp=4&shape=ngon&blades=7&angle=10&fstop=1.4")
+    try:
+        page.wait_for_function("window.bokehfitViewer.spp === 4", timeout=PAGE_TIMEOUT_MS)
+        frame = page.evaluate("window.bokehfitViewer.readImage()")
+    finally:
+        page.close()
+    assert frame["samples"] == 4
+    browser_image = np.asarray(frame["rgb"], dtype=np.float32).reshape(frame["height"], frame["width"], 3)
+    python_image = render("cornell", spp=4, width=frame["width"], height=frame["height"], **settings).image
+    same = (np.abs(browser_image - python_image).max(axis=-1) <= SAME_PIXEL_TOLERANCE).mean()
+    assert same >= MIN_SAME_PIXEL_FRACTION, f"only {same:.0%} of the pixels agree with the Python renderer"
+    np.testing.assert_allclose(browser_image.mean(axis=(0, 1)), python_image.mean(axis=(0, 1)), rtol=0.05)
+
+
+def test_matched_aperture_from_a_compare_result(browser, server, tmp_path):
+    path = tmp_path / "result.json"
+    path.write_text(json.dumps(compare_document(shape="ngon", blades=9, angle_deg=12.5, fstop=4.0)))
+    page = open_page(browser, server, "mode=edit")
+    try:
+        restarts = page.evaluate("window.bokehfitViewer.restarts")
+        page.set_input_files("#matched-file", str(path))
+        page.wait_for_function(f"window.bokehfitViewer.restarts > {restarts}", timeout=PAGE_TIMEOUT_MS)
+        state = page.evaluate("window.bokehfitViewer.state")
+        assert (state["shape"], state["blades"], state["angle_deg"], state["fstop"]) == ("ngon", 9, 12.5, 4.0)
+        assert page.input_value("#shape") == "ngon" and page.is_visible("#blades")
+        assert "ngon(9) 12.5°, f/4" in page.text_content("#settings")
+        assert "result.json" in page.text_content("#message")
+
+        bad = tmp_path / "bad.json"
+        bad.write_text(json.dumps({"discs": []}))
+        page.set_input_files("#matched-file", str(bad))
+        page.wait_for_function("document.getElementById('message').classList.contains('error')")
+        assert "aperture" in page.text_content("#message")
+    finally:
+        page.close()
+
+
+def png_text_chunks(data: bytes) -> dict[str, str]:
+    assert data[:8] == b"\x89PNG\r\n\x1a\n"
+    chunks, at = {}, 8
+    while at < len(data):
+        (length,) = struct.unpack(">I", data[at : at + 4])
+        kind = data[at + 4 : at + 8]
+        body = data[at + 8 : at + 8 + length]
+        (crc,) = struct.unpack(">I", data[at + 8 + length : at + 12 + length])
+        assert zlib.crc32(kind + body) == crc, f"bad CRC in {kind!r}"
+        if kind == b"tEXt":
+            key, text = body.split(b"\0", 1)
+            chunks[key.decode("latin-1")] = text.decode("latin-1")
+        at += 12 + length
+    return chunks
+
+
+def test_save_png_keeps_the_settings(browser, server, tmp_path):
+    page = open_page(browser, server, "mode=edit&max_spp=3&shape=star&angle=20&fstop=2")
+    try:
+        page.wait_for_function("window.bokehfitViewer.spp === 3", timeout=PAGE_TIMEOUT_MS)
+        with page.expect_download() as download:
+            page.click("#save-png")
+        name = download.value.suggested_filename
+        path = tmp_path / name
+        download.value.save_as(path)
+    finally:
+        page.close()
+    assert name == "bokehfit_cornell_star_20.0deg_f2.00_focus0.700m_3spp.png"
+    data = path.read_bytes()
+    record = json.loads(png_text_chunks(data)["bokehfit"])
+    assert record["lens"]["shape"] == "star" and record["lens"]["angle_deg"] == 20.0 and record["spp"] == 3
+    assert record["command_line"].startswith("bokehfit render --scene cornell --shape star")
+    image = pixels(data)
+    assert image.shape == (128, 128, 3) and image.var() > 0
+
+
+def test_without_webgpu_the_page_says_how_to_render(browser, server):
+    page = browser.new_page()
+    try:
+        page.add_init_script("delete Navigator.prototype.gpu;")
+        page.goto(server.url)
+        page.wait_for_function("document.body.dataset.ready === 'true'", timeout=PAGE_TIMEOUT_MS)
+        assert page.evaluate("document.body.dataset.webgpu") == "none"
+        assert page.is_visible("#no-webgpu") and not page.is_visible("#render")
+        text = page.text_content("#no-webgpu")
+        assert "no WebGPU" in text and "bokehfit render --scene cornell --out frame.png" in text
+        assert page.is_visible("#topdown") and "sharp from" in page.text_content("#settings")
+    finally:
+        page.close()
+
+
+def test_samples_per_second_at_512(browser, server):
+    """Prints the path tracer's speed in the page at 512×512 (samples per pixel per second)."""
+    page = browser.new_page()
+    try:
+        page.goto(f"{server.url}?size=512x512")
+        page.wait_for_function("document.body.dataset.ready === 'true'", timeout=PAGE_TIMEOUT_MS)
+        if page.evaluate("document.body.dataset.webgpu") != "ok":
+            _need("headless chromium has no usable WebGPU here")
+        wait_spp(page, 1)
+        start, first = time.perf_counter(), spp(page)
+        time.sleep(SPEED_SECONDS)
+        elapsed, last = time.perf_counter() - start, spp(page)
+        adapter = page.text_content("#adapter").strip("· ")
+    finally:
+        page.close()
+    rate = (last - first) / elapsed
+    print(f"viewer speed at 512x512 in headless chromium ({adapter}): {rate:.2f} spp/s, {rate * 512 * 512 / 1e6:.2f} M paths/s")
+    assert last > first
