@@ -34,6 +34,7 @@ import numpy as np
 
 from bokehfit.apertures import Aperture, make_aperture
 from bokehfit.errors import InputError, check_positive
+from bokehfit.optics import coc_mm
 
 __all__ = [
     "Lens",
@@ -86,10 +87,7 @@ class Lens:
 
     def coc_mm(self, depth_m: float) -> float:
         """Equal-area blur diameter on the sensor (mm) of a point at ``depth_m`` (may be inf)."""
-        f = self.focal_length_mm
-        inverse_m = 0.0 if math.isinf(depth_m) else 1.0 / depth_m
-        # f² (mm²) / N times |1/d_f − 1/d| (m⁻¹ = 10⁻³ mm⁻¹).
-        return f * f / self.fstop * abs(1.0 / self.focus_distance_m - inverse_m) / 1000.0
+        return coc_mm(self.fstop, self.focal_length_mm, self.focus_distance_m, depth_m, lens_model="pinhole")
 
     def coc_px(self, depth_m: float, width_px: int) -> float:
         """The same blur diameter in pixels of an image ``width_px`` wide."""
