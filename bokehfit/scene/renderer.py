@@ -35,7 +35,7 @@ from bokehfit.scene.geometry import BOX, MATERIAL, QUAD, SPHERE, Pose, Scene
 from bokehfit.scene.wgsl import scene_wgsl
 from bokehfit.scene.points import PointScene
 
-__all__ = ["RENDER_PARAMS", "POINT_PARAMS", "RenderResult", "pathtrace_source", "render_scene", "tile_plan", "total_work", "DEFAULT_MAX_TILE_PIXELS"]
+__all__ = ["RENDER_PARAMS", "POINT_PARAMS", "RenderResult", "pathtrace_source", "render_params", "render_scene", "set_tile", "tile_plan", "total_work", "DEFAULT_MAX_TILE_PIXELS"]
 
 RENDER_PARAMS = Struct(
     "RenderParams",
@@ -201,7 +201,7 @@ def _points_pipelines():
     )
 
 
-def _render_params(lens: Lens, settings: RenderSettings, pose: Pose) -> np.ndarray:
+def render_params(lens: Lens, settings: RenderSettings, pose: Pose) -> np.ndarray:
     """The uniform record, tile and sample fields left at 0."""
     aperture = lens.aperture
     angle = math.radians(aperture.angle_deg)
@@ -234,7 +234,7 @@ def _render_params(lens: Lens, settings: RenderSettings, pose: Pose) -> np.ndarr
     return record
 
 
-def _set_tile(record: np.ndarray, tile: tuple[int, int, int, int]) -> None:
+def set_tile(record: np.ndarray, tile: tuple[int, int, int, int]) -> None:
     record["tile_x"], record["tile_y"], record["tile_width"], record["tile_height"] = tile
 
 
@@ -289,7 +289,7 @@ def _path_trace(scene: Scene, lens: Lens, settings: RenderSettings, progress):
     device = gpu.device
     start = time.perf_counter()
     pipeline = _pathtrace_pipeline(scene_wgsl(scene, mirror_nee=settings.mirror_nee))
-    record = _render_params(lens, settings, scene.pose)
+    record = render_params(lens, settings, scene.pose)
     uniform = device.create_buffer(size=RENDER_PARAMS.dtype.itemsize, usage=wgpu.BufferUsage.UNIFORM | wgpu.BufferUsage.COPY_DST)
     max_side = _TILE_GROUP * device.limits["max-compute-workgroups-per-dimension"]
     tiles = tile_plan(settings.width, settings.height, _max_tile_pixels(device, settings), max_side)
@@ -318,7 +318,7 @@ def _path_trace(scene: Scene, lens: Lens, settings: RenderSettings, progress):
                 {"binding": 1, "resource": {"buffer": accum}},
             ],
         )
-        _set_tile(record, tile)
+        set_tile(record, tile)
         groups = (-(-w // _TILE_GROUP), -(-h // _TILE_GROUP))
         for sample in range(settings.spp):
             record["sample_index"] = sample
@@ -372,7 +372,7 @@ def _splat(scene: PointScene, lens: Lens, settings: RenderSettings, progress):
     device = gpu.device
     start = time.perf_counter()
     splat, resolve = _points_pipelines()
-    record = _render_params(lens, settings, Pose((0.0, 0.0, 0.0)))
+    record = render_params(lens, settings, Pose((0.0, 0.0, 0.0)))
     uniform = device.create_buffer(size=RENDER_PARAMS.dtype.itemsize, usage=wgpu.BufferUsage.UNIFORM | wgpu.BufferUsage.COPY_DST)
     light_uniform = device.create_buffer(size=POINT_PARAMS.dtype.itemsize, usage=wgpu.BufferUsage.UNIFORM | wgpu.BufferUsage.COPY_DST)
     tiles = tile_plan(settings.width, settings.height, _max_tile_pixels(device, settings), settings.width)
@@ -400,7 +400,7 @@ def _splat(scene: PointScene, lens: Lens, settings: RenderSettings, progress):
     light_record = np.zeros((), dtype=POINT_PARAMS.dtype)
     for tile in tiles:
         x, y, w, h = tile
-        _set_tile(record, tile)
+        set_tile(record, tile)
         device.queue.write_buffer(uniform, 0, record.tobytes())
         counts = device.create_buffer(size=4 * w * h, usage=wgpu.BufferUsage.STORAGE)
         accum = device.create_buffer(size=_ACCUM_BYTES * w * h, usage=wgpu.BufferUsage.STORAGE | wgpu.BufferUsage.COPY_SRC)

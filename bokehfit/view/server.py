@@ -58,7 +58,7 @@ from bokehfit.errors import InputError, check_finite
 from bokehfit.gpu.layout import Struct
 from bokehfit.scene import SCENES, Lens, Scene, build_scene, make_lens, make_settings
 from bokehfit.scene.camera import FOCAL_LENGTH_MM, FSTOP_RANGE, MAX_IMAGE_SIDE, SENSOR_WIDTH_MM
-from bokehfit.scene.renderer import RENDER_PARAMS, _render_params, _set_tile
+from bokehfit.scene.renderer import RENDER_PARAMS, render_params, set_tile
 from bokehfit.scene.renderer import pathtrace_source as renderer_source
 from bokehfit.scene.wgsl import scene_wgsl
 
@@ -155,8 +155,8 @@ def uniform_values(lens: Lens, width: int, height: int, scene: Scene) -> dict[st
     default path lengths of :func:`bokehfit.scene.make_settings`.
     """
     settings = make_settings(width, height, 1)
-    record = _render_params(lens, settings, scene.pose)
-    _set_tile(record, (0, 0, width, height))
+    record = render_params(lens, settings, scene.pose)
+    set_tile(record, (0, 0, width, height))
     return {name: record[name].item() for name, _ in RENDER_PARAMS.fields}
 
 
