@@ -85,6 +85,7 @@ def run_wgsl(gpu, expr: str, inputs: np.ndarray, in_type: str, out_type: str, na
     """
     import wgpu
 
+    from bokehfit.gpu.compute import bind_buffers, dispatch
     from bokehfit.gpu.shaders import load_shader
 
     in_dtype, in_comp = _TYPES[in_type]
@@ -101,24 +102,11 @@ def run_wgsl(gpu, expr: str, inputs: np.ndarray, in_type: str, out_type: str, na
     out_buffer = device.create_buffer(
         size=n * out_comp * 4, usage=wgpu.BufferUsage.STORAGE | wgpu.BufferUsage.COPY_SRC
     )
-    bind_group = device.create_bind_group(
-        layout=pipeline.get_bind_group_layout(0),
-        entries=[
-            {"binding": 0, "resource": {"buffer": in_buffer}},
-            {"binding": 1, "resource": {"buffer": out_buffer}},
-        ],
-    )
     groups = -(-n // WORKGROUP)
     limit = device.limits["max-compute-workgroups-per-dimension"]
     if groups > limit:
         raise ValueError(f"at most {limit * WORKGROUP} elements per harness call (got {n})")
-    encoder = device.create_command_encoder()
-    compute = encoder.begin_compute_pass()
-    compute.set_pipeline(pipeline)
-    compute.set_bind_group(0, bind_group)
-    compute.dispatch_workgroups(groups)
-    compute.end()
-    device.queue.submit([encoder.finish()])
+    dispatch(device, pipeline, bind_buffers(device, pipeline, in_buffer, out_buffer), groups)
     out = np.frombuffer(device.queue.read_buffer(out_buffer), dtype=out_dtype).copy()
     return out.reshape(n, out_comp) if out_comp > 1 else out
 

@@ -17,6 +17,7 @@ import numpy as np
 
 from bokehfit.apertures import Aperture
 from bokehfit.gpu import get_gpu
+from bokehfit.gpu.compute import bind_buffers, dispatch
 from bokehfit.gpu.layout import Struct
 from bokehfit.gpu.shaders import load_shader
 
@@ -86,20 +87,7 @@ def mc_counts(aperture: Aperture, scale: float, size: int, samples: int, seed: i
     uniform = device.create_buffer_with_data(data=params, usage=wgpu.BufferUsage.UNIFORM)
     counts = device.create_buffer(size=4 * size * size, usage=wgpu.BufferUsage.STORAGE | wgpu.BufferUsage.COPY_SRC)
     pipeline = prepare_pipeline()
-    bind_group = device.create_bind_group(
-        layout=pipeline.get_bind_group_layout(0),
-        entries=[
-            {"binding": 0, "resource": {"buffer": uniform}},
-            {"binding": 1, "resource": {"buffer": counts}},
-        ],
-    )
     groups = min(-(-drawn // (_WORKGROUP * _SAMPLES_PER_THREAD)), device.limits["max-compute-workgroups-per-dimension"])
-    encoder = device.create_command_encoder()
-    compute = encoder.begin_compute_pass()
-    compute.set_pipeline(pipeline)
-    compute.set_bind_group(0, bind_group)
-    compute.dispatch_workgroups(max(groups, 1))
-    compute.end()
-    device.queue.submit([encoder.finish()])
+    dispatch(device, pipeline, bind_buffers(device, pipeline, uniform, counts), max(groups, 1))
     data = device.queue.read_buffer(counts)
     return np.frombuffer(data, dtype=np.uint32).reshape(size, size), drawn

@@ -28,6 +28,7 @@ from typing import Callable
 import numpy as np
 
 from bokehfit.gpu import get_gpu
+from bokehfit.gpu.compute import bind_buffers, dispatch
 from bokehfit.gpu.layout import Struct
 from bokehfit.gpu.shaders import load_shader
 from bokehfit.scene.camera import Lens, RenderSettings
@@ -266,16 +267,6 @@ class _Ticker:
         self.last = time.perf_counter()
 
 
-def _dispatch(device, pipeline, bind_group, x: int, y: int = 1) -> None:
-    encoder = device.create_command_encoder()
-    compute = encoder.begin_compute_pass()
-    compute.set_pipeline(pipeline)
-    compute.set_bind_group(0, bind_group)
-    compute.dispatch_workgroups(x, y)
-    compute.end()
-    device.queue.submit([encoder.finish()])
-
-
 def _read_tile(device, accum, tile) -> np.ndarray:
     _, _, w, h = tile
     return np.frombuffer(device.queue.read_buffer(accum), dtype=np.float32).reshape(h, w, 4)
@@ -297,11 +288,7 @@ def _path_trace(scene: Scene, lens: Lens, settings: RenderSettings, progress):
     # (lavapipe does) does it inside the setup time, not the render time.
     probe = device.create_buffer(size=_ACCUM_BYTES, usage=wgpu.BufferUsage.STORAGE | wgpu.BufferUsage.COPY_SRC)
     device.queue.write_buffer(uniform, 0, record.tobytes())  # tile 0 × 0: every invocation returns
-    warm = device.create_bind_group(
-        layout=pipeline.get_bind_group_layout(0),
-        entries=[{"binding": 0, "resource": {"buffer": uniform}}, {"binding": 1, "resource": {"buffer": probe}}],
-    )
-    _dispatch(device, pipeline, warm, 1, 1)
+    dispatch(device, pipeline, bind_buffers(device, pipeline, uniform, probe), 1, 1)
     device.queue.read_buffer(probe)
     setup = time.perf_counter() - start
 
@@ -311,19 +298,13 @@ def _path_trace(scene: Scene, lens: Lens, settings: RenderSettings, progress):
         x, y, w, h = tile
         accum = device.create_buffer(size=_ACCUM_BYTES * w * h, usage=wgpu.BufferUsage.STORAGE | wgpu.BufferUsage.COPY_SRC)
         ticker = _Ticker(device, progress, accum)
-        bind_group = device.create_bind_group(
-            layout=pipeline.get_bind_group_layout(0),
-            entries=[
-                {"binding": 0, "resource": {"buffer": uniform}},
-                {"binding": 1, "resource": {"buffer": accum}},
-            ],
-        )
+        bind_group = bind_buffers(device, pipeline, uniform, accum)
         set_tile(record, tile)
         groups = (-(-w // _TILE_GROUP), -(-h // _TILE_GROUP))
         for sample in range(settings.spp):
             record["sample_index"] = sample
             device.queue.write_buffer(uniform, 0, record.tobytes())
-            _dispatch(device, pipeline, bind_group, *groups)
+            dispatch(device, pipeline, bind_group, *groups)
             ticker.add(w * h)
         ticker.flush()
         data = _read_tile(device, accum, tile)
@@ -382,15 +363,8 @@ def _splat(scene: PointScene, lens: Lens, settings: RenderSettings, progress):
     device.queue.write_buffer(uniform, 0, record.tobytes())
     device.queue.write_buffer(light_uniform, 0, np.zeros((), dtype=POINT_PARAMS.dtype).tobytes())
     probes = [device.create_buffer(size=_ACCUM_BYTES, usage=wgpu.BufferUsage.STORAGE | wgpu.BufferUsage.COPY_SRC) for _ in range(2)]
-    layouts = [p.get_bind_group_layout(0) for p in (splat, resolve)]
-    entries = [
-        {"binding": 0, "resource": {"buffer": uniform}},
-        {"binding": 1, "resource": {"buffer": light_uniform}},
-        {"binding": 2, "resource": {"buffer": probes[0]}},
-        {"binding": 3, "resource": {"buffer": probes[1]}},
-    ]
-    _dispatch(device, splat, device.create_bind_group(layout=layouts[0], entries=entries[:3]), 1)
-    _dispatch(device, resolve, device.create_bind_group(layout=layouts[1], entries=entries), 1)
+    dispatch(device, splat, bind_buffers(device, splat, uniform, light_uniform, probes[0]), 1)
+    dispatch(device, resolve, bind_buffers(device, resolve, uniform, light_uniform, *probes), 1)
     device.queue.read_buffer(probes[1])
     setup = time.perf_counter() - start
 
@@ -405,23 +379,8 @@ def _splat(scene: PointScene, lens: Lens, settings: RenderSettings, progress):
         counts = device.create_buffer(size=4 * w * h, usage=wgpu.BufferUsage.STORAGE)
         accum = device.create_buffer(size=_ACCUM_BYTES * w * h, usage=wgpu.BufferUsage.STORAGE | wgpu.BufferUsage.COPY_SRC)
         ticker = _Ticker(device, progress, accum)
-        splat_group = device.create_bind_group(
-            layout=splat.get_bind_group_layout(0),
-            entries=[
-                {"binding": 0, "resource": {"buffer": uniform}},
-                {"binding": 1, "resource": {"buffer": light_uniform}},
-                {"binding": 2, "resource": {"buffer": counts}},
-            ],
-        )
-        resolve_group = device.create_bind_group(
-            layout=resolve.get_bind_group_layout(0),
-            entries=[
-                {"binding": 0, "resource": {"buffer": uniform}},
-                {"binding": 1, "resource": {"buffer": light_uniform}},
-                {"binding": 2, "resource": {"buffer": counts}},
-                {"binding": 3, "resource": {"buffer": accum}},
-            ],
-        )
+        splat_group = bind_buffers(device, splat, uniform, light_uniform, counts)
+        resolve_group = bind_buffers(device, resolve, uniform, light_uniform, counts, accum)
         for plan in plans:
             x0, y0, x1, y1 = plan["box"]
             if x1 < x or x0 > x + w or y1 < y or y0 > y + h:
@@ -433,10 +392,10 @@ def _splat(scene: PointScene, lens: Lens, settings: RenderSettings, progress):
                 count = min(_SPLAT_CHUNK, plan["samples"] - first)
                 light_record["first"], light_record["count"] = first, count
                 device.queue.write_buffer(light_uniform, 0, light_record.tobytes())
-                _dispatch(device, splat, splat_group, min(-(-count // _LINEAR_GROUP), max_groups))
+                dispatch(device, splat, splat_group, min(-(-count // _LINEAR_GROUP), max_groups))
                 drawn += count
                 ticker.add(count)
-            _dispatch(device, resolve, resolve_group, min(-(-(w * h) // _LINEAR_GROUP), max_groups))
+            dispatch(device, resolve, resolve_group, min(-(-(w * h) // _LINEAR_GROUP), max_groups))
         ticker.flush()
         image[y : y + h, x : x + w] = _read_tile(device, accum, tile)[..., :3]
         counts.destroy()
