@@ -158,7 +158,7 @@ def test_unknown_paths_and_hosts_are_refused(server):
     assert get(server, "/../pyproject.toml")[0] == 404
     assert get(server, "/secret")[0] == 404
     status, _, body = get(server, "/config.json", host=f"evil.example:{server.port}")
-    assert status == 403 and "Host" in json.loads(body)["error"]
+    assert status == 421 and "Host" in json.loads(body)["error"]
     status, kind, body = get(server, "/")
     assert status == 200 and kind.startswith("text/html") and b'id="render"' in body
 
@@ -199,7 +199,7 @@ def test_settings_from_compare():
     "document,needle",
     [
         ({"discs": []}, "no 'aperture'"),
-        ({"schema_version": 2, "aperture": {"shape": "circle"}}, "schema_version"),
+        ({"schema_version": 3, "aperture": {"shape": "circle"}}, "schema_version"),
         ({"aperture": {"shape": None}}, "fitted no aperture"),
         ({"aperture": {"shape": "hexgon"}}, "shape must be one of"),
         ({"aperture": {"shape": "ngon", "blades": 99}}, "blades"),
@@ -217,10 +217,24 @@ def test_matched_endpoint(server):
     assert status == 400 and "not JSON" in answer["error"]
 
 
+#: Longest wait for `bokehfit view` to stop after Ctrl-C (s).
+STOP_TIMEOUT_S = 15
+
+
 def test_cli_serves_until_ctrl_c(tmp_path):
+    serve_then_ctrl_c(tmp_path)
+
+
+def test_cli_stops_on_ctrl_c_when_started_with_sigint_ignored(tmp_path):
+    """A background job inherits SIGINT ignored; `bokehfit view` must still stop on it."""
+    serve_then_ctrl_c(tmp_path, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
+
+
+def serve_then_ctrl_c(tmp_path, **popen):
+    """Start `bokehfit view`, fetch its config, send SIGINT: a clean stop ("stopped", exit 0) in bounded time."""
     process = subprocess.Popen(
         [sys.executable, "-m", "bokehfit", "view", "--no-browser", "--port", "0", "--size", "64x48"],
-        cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **popen,
     )
     try:
         line = process.stdout.readline()
@@ -229,7 +243,10 @@ def test_cli_serves_until_ctrl_c(tmp_path):
         with urllib.request.urlopen(match.group(0) + "config.json", timeout=30) as response:
             assert json.loads(response.read())["defaults"]["width"] == 64
         process.send_signal(signal.SIGINT)
-        out, err = process.communicate(timeout=30)
+        try:
+            out, err = process.communicate(timeout=STOP_TIMEOUT_S)
+        except subprocess.TimeoutExpired:
+            pytest.fail(f"`bokehfit view` did not stop within {STOP_TIMEOUT_S} s of SIGINT", pytrace=False)
     finally:
         if process.poll() is None:
             process.kill()

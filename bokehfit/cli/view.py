@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
+import signal
 import sys
 import threading
 import webbrowser
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 from bokehfit.cli.render import parse_size
@@ -46,17 +49,39 @@ def run(args: argparse.Namespace) -> ViewSession:
     width, height = parse_size(args.size)
     server = ViewerServer(args.port, size=(width, height), verbose=args.verbose)
     url = server.url
-    print(f"bokehfit view: serving {url} (Ctrl-C stops)", flush=True)
-    if not args.no_browser:
-        # In a thread: a console browser (www-browser) would otherwise hold up the server.
-        threading.Thread(target=_open_browser, args=(url,), name="bokehfit-view-browser", daemon=True).start()
-    try:
-        server.serve_forever()
-    except KeyboardInterrupt:
-        print("\nbokehfit view: stopped", flush=True)
-    finally:
-        server.close()
+    with _ctrl_c_interrupts():
+        try:
+            print(f"bokehfit view: serving {url} (Ctrl-C stops)", flush=True)
+            if not args.no_browser:
+                # In a thread: a console browser (www-browser) would otherwise hold up the server.
+                threading.Thread(target=_open_browser, args=(url,), name="bokehfit-view-browser", daemon=True).start()
+            server.serve_forever()
+        except KeyboardInterrupt:
+            print("\nbokehfit view: stopped", flush=True)
+        finally:
+            server.close()
     return ViewSession(url, not args.no_browser)
+
+
+@contextlib.contextmanager
+def _ctrl_c_interrupts() -> Iterator[None]:
+    """Ctrl-C (SIGINT) raises KeyboardInterrupt while inside, whatever the process inherited.
+
+    A process started with SIGINT ignored (a shell's background job, a test
+    runner in the background) keeps it ignored: Python installs its handler
+    only where SIGINT is not ignored at start. The server installs it itself,
+    and puts the inherited disposition back on the way out. Signal handlers
+    belong to the main thread: elsewhere this does nothing.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    inherited = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        yield
+    finally:
+        if inherited is not None:  # None: a handler not installed from Python, which cannot be put back
+            signal.signal(signal.SIGINT, inherited)
 
 
 def _open_browser(url: str) -> None:

@@ -31,9 +31,20 @@ Routes
     Body: a ``bokehfit compare --json`` document; answer: the viewer
     settings of its fitted aperture (:func:`settings_from_compare`).
 
-The server listens on 127.0.0.1 only and answers only requests whose Host
-header names it (``127.0.0.1:PORT`` or ``localhost:PORT``), so that another
-web site cannot reach it through a rebound DNS name.
+Every other path answers 404, and a route asked with a method it does not
+serve answers 405 with ``Allow``.
+
+The server listens on 127.0.0.1 only, on a thread per connection (at most
+``MAX_CONNECTIONS`` at once), one request per connection. Each request is
+checked in one place before any route sees it: exactly one Host header, and it
+names the server (``127.0.0.1:PORT`` or ``localhost:PORT``; else 400 or 421),
+so that another web site cannot reach it through a rebound DNS name; a method
+the path serves (else 405); a request line and header block within their caps
+(414, 431); for POST a Content-Length within ``MAX_BODY_BYTES`` (411, 413). A
+client that stalls is answered 408; JSON bodies are parsed with bounded
+nesting and numbers (:func:`parse_json_body`). Every request gets a status
+line and a JSON ``{"error": message}`` body when refused; an unexpected
+failure answers 500 and logs one line on stderr.
 """
 
 from __future__ import annotations
@@ -41,7 +52,10 @@ from __future__ import annotations
 import json
 import math
 import re
+import socket
+import sys
 import threading
+import time
 from dataclasses import dataclass
 from functools import lru_cache
 from http import HTTPStatus
@@ -67,7 +81,9 @@ __all__ = [
     "DepthOfField",
     "ViewerServer",
     "depth_of_field",
+    "json_depth",
     "params_for_query",
+    "parse_json_body",
     "pathtrace_source",
     "settings_from_compare",
     "uniform_layout",
@@ -90,6 +106,28 @@ FOCUS_SLIDER_NEAR_M = 0.1
 FOCUS_SLIDER_REACH = 2.0
 #: Largest request body of POST /matched (bytes).
 MAX_BODY_BYTES = 8 * 2**20
+#: Longest request line (method, target and version, bytes): 414 beyond.
+MAX_REQUEST_LINE_BYTES = 8192
+#: Largest header block (names, values and separators, bytes): 431 beyond. The
+#: header parser (http.client) also stops at 100 lines of 64 KiB while reading.
+MAX_HEADER_BYTES = 32768
+#: Deepest nesting of arrays and objects in a JSON body (a compare result nests 4 deep).
+MAX_JSON_DEPTH = 32
+#: Longest integer literal in a JSON body (digits; 2**64 has 20).
+MAX_JSON_INT_DIGITS = 32
+#: A client silent for this long is answered 408 and dropped (s).
+REQUEST_TIMEOUT_S = 10.0
+#: Longest time to receive one request body, however it trickles in (s).
+BODY_DEADLINE_S = 30.0
+#: Requests answered at once; further connections wait in the listen queue.
+MAX_CONNECTIONS = 64
+LISTEN_BACKLOG = 256
+#: After answering, the server reads what the client still sends (a body it
+#: refused unread) for at most this long and this much before it closes the
+#: socket, so that the close does not reset the connection before the client
+#: has read the answer (s, bytes).
+LINGER_S = 2.0
+LINGER_BYTES = MAX_BODY_BYTES
 
 _STATIC = {
     "/": ("index.html", "text/html; charset=utf-8"),
@@ -98,6 +136,17 @@ _STATIC = {
     "/style.css": ("style.css", "text/css; charset=utf-8"),
 }
 _WGSL_TYPES = ("f32", "u32", "i32")
+#: The methods each path serves (HEAD wherever GET); every other method answers 405.
+_READ = ("GET", "HEAD")
+_ROUTES = {
+    **{path: _READ for path in _STATIC},
+    "/pathtrace.wgsl": _READ,
+    "/config.json": _READ,
+    "/params.json": _READ,
+    "/favicon.ico": _READ,
+    "/matched": ("POST",),
+}
+_METHODS = ("GET", "HEAD", "POST")
 
 
 # --- what the page needs, computed by the renderer's own code -------------------------------
@@ -356,6 +405,103 @@ def params_for_query(query: dict, scene_name: str = "cornell") -> dict:
     }
 
 
+def _brief(value, limit: int = 40) -> str:
+    """``value`` described in one short line, for an error message (never a huge repr)."""
+    if isinstance(value, list):
+        return f"an array of {len(value)} items"
+    if isinstance(value, dict):
+        return f"an object of {len(value)} keys"
+    if isinstance(value, int) and not isinstance(value, bool) and value.bit_length() > 64:
+        return f"an integer of {len(str(value)) if value.bit_length() < 10_000 else 'thousands of'} digits"
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 1] + "…"
+
+
+def _finite_number(name: str, value) -> float:
+    """``value`` as a float, or ``InputError`` naming ``name`` where it is not a finite JSON number."""
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        try:
+            number = float(value)
+        except OverflowError:  # an int beyond the float range
+            number = math.inf
+        if math.isfinite(number):
+            return number
+    raise InputError(f"{name} must be a finite number (got {_brief(value)})")
+
+
+# A JSON string literal (RFC 8259 §7), as the unrolled loop "[^"\\]*(\\.[^"\\]*)*": linear time.
+_JSON_STRING = re.compile(rb'"[^"\\]*(?:\\.[^"\\]*)*"', re.DOTALL)
+
+
+def json_depth(body: bytes) -> int:
+    """Deepest nesting of arrays and objects in the JSON text ``body``, brackets in strings not counted.
+
+    Counted without parsing (a running sum of opening minus closing brackets),
+    so that a body nested 100,000 deep is refused before any recursion.
+    """
+    outside_strings = np.frombuffer(_JSON_STRING.sub(b'""', body), dtype=np.uint8)
+    opens = np.isin(outside_strings, np.frombuffer(b"[{", dtype=np.uint8))
+    closes = np.isin(outside_strings, np.frombuffer(b"]}", dtype=np.uint8))
+    steps = opens.astype(np.int64) - closes
+    return int(np.cumsum(steps).max(initial=0))
+
+
+def parse_json_body(body: bytes, *, max_depth: int = MAX_JSON_DEPTH, max_int_digits: int = MAX_JSON_INT_DIGITS):
+    """A request body parsed as strict JSON, with bounded nesting and numbers.
+
+    Parameters
+    ----------
+    body : bytes
+        UTF-8 JSON text.
+    max_depth : int
+        Deepest nesting of arrays and objects accepted (see :func:`json_depth`).
+    max_int_digits : int
+        Longest integer literal accepted (digits), well below Python's
+        int-string conversion limit (4300 digits), which would raise mid-parse.
+
+    Returns
+    -------
+    object
+        The parsed value; every number in it is a finite float or a bounded int.
+
+    Raises
+    ------
+    InputError
+        One line starting "the body is not JSON" where the body is not UTF-8,
+        not JSON, nested too deep, or holds NaN, ±Infinity, a float beyond the
+        float range (1e999) or a longer integer.
+    """
+
+    def bounded_int(text: str) -> int:
+        digits = len(text.lstrip("-"))
+        if digits > max_int_digits:
+            raise ValueError(f"an integer of {digits} digits (at most {max_int_digits})")
+        return int(text)
+
+    def finite_float(text: str) -> float:
+        value = float(text)
+        if not math.isfinite(value):
+            raise ValueError(f"the number {text[:20]}{'…' if len(text) > 20 else ''} is beyond the float range")
+        return value
+
+    def no_constant(name: str):
+        raise ValueError(f"{name} is not a JSON number")
+
+    try:
+        text = body.decode("utf-8")
+    except UnicodeDecodeError as error:
+        raise InputError(f"the body is not JSON: it is not UTF-8 (byte {error.start})") from None
+    depth = json_depth(body)
+    if depth > max_depth:
+        raise InputError(f"the body nests {depth} deep: at most {max_depth} is read")
+    try:
+        return json.loads(text, parse_int=bounded_int, parse_float=finite_float, parse_constant=no_constant)
+    except RecursionError:  # not reached after the depth check; kept as the last guard
+        raise InputError(f"the body nests deeper than {max_depth}: at most {max_depth} is read") from None
+    except ValueError as error:  # JSONDecodeError and the hooks' refusals
+        raise InputError(f"the body is not JSON: {error}") from None
+
+
 def settings_from_compare(document: dict) -> dict:
     """The viewer settings of the aperture fitted in a ``bokehfit compare --json`` document.
 
@@ -373,24 +519,30 @@ def settings_from_compare(document: dict) -> dict:
     if not isinstance(document, dict) or not isinstance(document.get("aperture"), dict):
         raise InputError("the file must be a `bokehfit compare --json` result (it has no 'aperture' object)")
     version = document.get("schema_version")
-    if version is not None and version != 1:
-        raise InputError(f"compare results of schema_version 1 are understood (got {version!r})")
+    if version is not None and (isinstance(version, bool) or version not in (1, 2)):
+        raise InputError(f"compare results of schema_version 1 or 2 are understood (got {_brief(version)})")
     a = document["aperture"]
     shape = a.get("shape")
     if shape is None:
         raise InputError("the compare result fitted no aperture (aperture.shape is null)")
-    if shape not in SHAPES:
-        raise InputError(f"aperture.shape must be one of {', '.join(SHAPES)} (got {shape!r})")
+    if not isinstance(shape, str) or shape not in SHAPES:
+        raise InputError(f"aperture.shape must be one of {', '.join(SHAPES)} (got {_brief(shape)})")
     spec = SHAPES[shape]
     angle = a.get("angle_deg")
-    angle = 0.0 if angle is None else check_finite("aperture.angle_deg", angle)
+    angle = 0.0 if angle is None else _finite_number("aperture.angle_deg", angle)
     blades = a.get("blades") if spec.takes_blades else None
+    if blades is not None and (isinstance(blades, bool) or not isinstance(blades, int) or not 3 <= blades <= MAX_BLADES):
+        raise InputError(f"aperture.blades must be an integer from 3 to {MAX_BLADES} (got {_brief(blades)})")
     aspect = a.get("aspect") if spec.takes_aspect else None
-    aperture = make_aperture(shape, angle, blades=blades, aspect=aspect)  # validates them
+    aspect = None if aspect is None else _finite_number("aperture.aspect", aspect)
+    for key in ("focus_side", "size_convention", "fstop_reason"):
+        if a.get(key) is not None and not isinstance(a[key], str):
+            raise InputError(f"aperture.{key} must be a string or null (got {_brief(a[key])})")
+    aperture = make_aperture(shape, angle, blades=blades, aspect=aspect)  # validates their ranges
     notes = []
     fstop = a.get("fstop")
     if fstop is not None:
-        fstop = check_finite("aperture.fstop", fstop)
+        fstop = _finite_number("aperture.fstop", fstop)
         if a.get("size_convention") == "circumscribed":
             fstop = fstop * aperture.extent() * math.sqrt(math.pi)
             notes.append("f-stop converted from the circumscribed to the equal-area convention")
@@ -417,41 +569,179 @@ def settings_from_compare(document: dict) -> dict:
 # --- the HTTP server ------------------------------------------------------------------------
 
 
+class _Refused(Exception):
+    """A request answered with ``status`` and a one-line message instead of its route."""
+
+    def __init__(self, status: HTTPStatus, message: str, headers: tuple[tuple[str, str], ...] = ()):
+        super().__init__(message)
+        self.status = status
+        self.message = message
+        self.headers = headers
+
+
 class _Handler(BaseHTTPRequestHandler):
+    """One request per connection: read, validate in :meth:`_check_request`, route, always answer."""
+
     server: _HTTPServer
     server_version = f"bokehfit-view/{__version__}"
 
-    def log_message(self, format, *args):  # quiet: the page polls nothing, but keep stdout clean
+    @property
+    def timeout(self) -> float:  # read by StreamRequestHandler.setup: the socket's timeout
+        return self.server.request_timeout_s
+
+    def log_message(self, format, *args):  # quiet unless --verbose: keep the terminal clean
         if self.server.verbose:
             super().log_message(format, *args)
 
-    def _host_ok(self) -> bool:
-        host = (self.headers.get("Host") or "").lower()
-        port = self.server.server_address[1]
-        return host in (f"127.0.0.1:{port}", f"localhost:{port}")
+    def _log_line(self, message: str) -> None:
+        """One line on stderr, verbose or not: a failure the user should report."""
+        print(f"bokehfit view: {message}", file=sys.stderr, flush=True)
 
-    def _send(self, status: int, body: bytes, content_type: str, cache: bool = False) -> None:
+    # --- answering --------------------------------------------------------------------------
+
+    def _send(self, status: int, body: bytes, content_type: str, headers: tuple[tuple[str, str], ...] = ()) -> None:
+        self._answered = True
         self.send_response(status)
+        for name, value in headers:
+            self.send_header(name, value)
         self.send_header("Content-Type", content_type)
         self.send_header("Content-Length", str(len(body)))
-        self.send_header("Cache-Control", "max-age=60" if cache else "no-store")
+        self.send_header("Cache-Control", "no-store")
         self.send_header("X-Content-Type-Options", "nosniff")
+        self.send_header("Connection", "close")
         self.end_headers()
         if self.command != "HEAD":
             self.wfile.write(body)
 
-    def _json(self, status: int, data) -> None:
-        self._send(status, json.dumps(data, allow_nan=False).encode("utf-8"), "application/json; charset=utf-8")
+    def _json(self, status: int, data, headers: tuple[tuple[str, str], ...] = ()) -> None:
+        body = json.dumps(data, allow_nan=False).encode("utf-8")
+        self._send(status, body, "application/json; charset=utf-8", headers)
 
-    def _error(self, status: int, message: str) -> None:
-        self._json(status, {"error": message})
+    def _error(self, status: int, message: str, headers: tuple[tuple[str, str], ...] = ()) -> None:
+        self.log_message('"%s" %d %s', self.requestline[:200], int(status), message)
+        self._json(status, {"error": message}, headers)
 
-    def do_HEAD(self):
-        self.do_GET()
+    def send_error(self, code, message=None, explain=None):
+        """The standard library's refusals (bad request line or headers) as JSON like every other."""
+        status = HTTPStatus(code)
+        self.request_version = "HTTP/1.0"  # a status line even where the request line was unreadable
+        self._error(status, f"{status.phrase}: {message}" if message else status.phrase)
 
-    def do_GET(self):
-        if not self._host_ok():
-            return self._error(HTTPStatus.FORBIDDEN, "unknown Host: open the URL that `bokehfit view` printed")
+    def _answer_late(self, status: HTTPStatus, message: str, headers: tuple[tuple[str, str], ...] = ()) -> None:
+        """Answer a failure unless an answer has started; a client gone already gets nothing."""
+        if self._answered:
+            return
+        try:
+            self._error(status, message, headers)
+        except OSError:
+            pass
+
+    # --- one request ------------------------------------------------------------------------
+
+    def handle_one_request(self) -> None:
+        """Read one request, validate it, answer it; nothing escapes as a traceback."""
+        self.close_connection = True  # one request per connection
+        self.command, self.requestline, self.request_version = "", "", "HTTP/1.0"
+        self._answered = False
+        try:
+            try:
+                if not self.connection.recv(1, socket.MSG_PEEK):
+                    return  # the client closed without asking
+            except TimeoutError:
+                return  # an idle connection (a browser's preconnect): no request to answer
+            self.raw_requestline = self.rfile.readline(MAX_REQUEST_LINE_BYTES + 1)
+            if not self.raw_requestline:
+                return  # the client closed without asking
+            if len(self.raw_requestline) > MAX_REQUEST_LINE_BYTES:
+                raise _Refused(HTTPStatus.REQUEST_URI_TOO_LONG, f"the request line must be at most {MAX_REQUEST_LINE_BYTES} bytes")
+            if not self.raw_requestline.endswith(b"\n"):
+                raise _Refused(HTTPStatus.BAD_REQUEST, "the request line ended without a line break")
+            if not self.raw_requestline.strip():
+                raise _Refused(HTTPStatus.BAD_REQUEST, "the request line is empty")
+            if not self.parse_request():
+                return  # parse_request answered through send_error
+            if self.request_version == "HTTP/0.9":
+                self.request_version = "HTTP/1.0"  # answer with a status line all the same
+                raise _Refused(HTTPStatus.BAD_REQUEST, "the request line must end with HTTP/1.0 or HTTP/1.1")
+            route = self._check_request()
+            route()
+        except _Refused as refused:
+            self._answer_late(refused.status, refused.message, refused.headers)
+        except TimeoutError:
+            self._answer_late(HTTPStatus.REQUEST_TIMEOUT, f"the request did not arrive within {self.server.request_timeout_s:g} s")
+        except ConnectionError:
+            pass  # the client hung up: nobody to answer
+        except Exception as error:  # a bug: one line on stderr, 500 to the client
+            self._log_line(f"internal error answering {self.requestline[:200]!r}: {type(error).__name__}: {error}")
+            self._answer_late(HTTPStatus.INTERNAL_SERVER_ERROR, f"internal error: {type(error).__name__} (see the terminal of `bokehfit view`)")
+        try:
+            self.wfile.flush()
+        except OSError:
+            pass
+
+    def _check_request(self):
+        """The one gate before any route: Host, target, method, header size, body headers.
+
+        Returns the bound method that answers the request; raises ``_Refused``.
+        """
+        hosts = self.headers.get_all("Host") or []
+        if len(hosts) != 1:
+            raise _Refused(HTTPStatus.BAD_REQUEST, f"a request must carry exactly one Host header (got {len(hosts)})")
+        if hosts[0].strip().lower() not in self.server.own_hosts:
+            raise _Refused(HTTPStatus.MISDIRECTED_REQUEST, "unknown Host: open the URL that `bokehfit view` printed")
+        size = sum(len(name) + len(value) + 4 for name, value in self.headers.items())
+        if size > MAX_HEADER_BYTES:
+            raise _Refused(HTTPStatus.REQUEST_HEADER_FIELDS_TOO_LARGE, f"the headers must be at most {MAX_HEADER_BYTES} bytes (got {size})")
+        try:
+            url = urlsplit(self.path)
+        except ValueError:  # e.g. an unbalanced [ in an authority
+            url = None
+        if url is None or not self.path.startswith("/") or url.netloc:
+            raise _Refused(HTTPStatus.BAD_REQUEST, "the request target must be a path starting with /")
+        allowed = _ROUTES.get(url.path)
+        if self.command not in (allowed or _METHODS):
+            allow = ", ".join(allowed or _METHODS)
+            raise _Refused(HTTPStatus.METHOD_NOT_ALLOWED, f"{self.command[:20]} is not served here (Allow: {allow})", (("Allow", allow),))
+        if allowed is None:
+            raise _Refused(HTTPStatus.NOT_FOUND, f"no such page: {url.path[:200]}")
+        if self.headers.get_all("Transfer-Encoding"):
+            raise _Refused(HTTPStatus.LENGTH_REQUIRED, "send the body with a Content-Length (Transfer-Encoding is not read)")
+        if self.command == "POST":
+            length = self._content_length()
+            return lambda: self._post(length)
+        return self._get
+
+    def _content_length(self) -> int:
+        """The POST body's declared length: one Content-Length, 1 byte to MAX_BODY_BYTES."""
+        values = self.headers.get_all("Content-Length") or []
+        if not values:
+            raise _Refused(HTTPStatus.LENGTH_REQUIRED, "a POST request must carry a Content-Length")
+        if len(values) != 1 or not values[0].strip().isdigit() or not values[0].strip().isascii():
+            raise _Refused(HTTPStatus.BAD_REQUEST, "the Content-Length must be one decimal number")
+        digits = values[0].strip()
+        if len(digits) > 12 or int(digits) > MAX_BODY_BYTES:
+            raise _Refused(HTTPStatus.REQUEST_ENTITY_TOO_LARGE, f"the body must be at most {MAX_BODY_BYTES >> 20} MiB")
+        if int(digits) == 0:
+            raise _Refused(HTTPStatus.BAD_REQUEST, "the body is empty: send a `bokehfit compare --json` result")
+        return int(digits)
+
+    def _read_body(self, length: int) -> bytes:
+        """``length`` bytes of body, within BODY_DEADLINE_S however slowly they come."""
+        deadline = time.monotonic() + BODY_DEADLINE_S
+        chunks, remaining = [], length
+        while remaining:
+            if time.monotonic() > deadline:
+                raise TimeoutError(f"the body took longer than {BODY_DEADLINE_S:g} s")
+            chunk = self.rfile.read1(min(remaining, 1 << 16))
+            if not chunk:
+                raise _Refused(HTTPStatus.BAD_REQUEST, f"the body ended after {length - remaining} of {length} bytes")
+            chunks.append(chunk)
+            remaining -= len(chunk)
+        return b"".join(chunks)
+
+    # --- the routes -------------------------------------------------------------------------
+
+    def _get(self) -> None:
         url = urlsplit(self.path)
         try:
             if url.path in _STATIC:
@@ -469,43 +759,73 @@ class _Handler(BaseHTTPRequestHandler):
                 return self._send(HTTPStatus.NO_CONTENT, b"", "image/x-icon")
         except InputError as error:
             return self._error(HTTPStatus.BAD_REQUEST, str(error))
-        return self._error(HTTPStatus.NOT_FOUND, f"no such page: {url.path}")
+        raise RuntimeError(f"route {url.path!r} is in _ROUTES but has no answer")
 
-    def do_POST(self):
-        if not self._host_ok():
-            return self._error(HTTPStatus.FORBIDDEN, "unknown Host: open the URL that `bokehfit view` printed")
-        if urlsplit(self.path).path != "/matched":
-            return self._error(HTTPStatus.NOT_FOUND, f"no such page: {self.path}")
+    def _post(self, length: int) -> None:  # /matched, the one POST route
+        body = self._read_body(length)
         try:
-            length = int(self.headers.get("Content-Length") or 0)
-        except ValueError:
-            length = -1
-        if not 0 < length <= MAX_BODY_BYTES:
-            return self._error(HTTPStatus.BAD_REQUEST, f"the compare result must be 1 byte to {MAX_BODY_BYTES >> 20} MiB")
-        try:
-            document = json.loads(self.rfile.read(length).decode("utf-8"))
-        except (UnicodeDecodeError, json.JSONDecodeError) as error:
-            return self._error(HTTPStatus.BAD_REQUEST, f"the file is not JSON: {error}")
-        try:
-            return self._json(HTTPStatus.OK, settings_from_compare(document))
+            return self._json(HTTPStatus.OK, settings_from_compare(parse_json_body(body)))
         except InputError as error:
             return self._error(HTTPStatus.BAD_REQUEST, str(error))
 
 
 class _HTTPServer(ThreadingHTTPServer):
+    """A thread per connection, at most MAX_CONNECTIONS at once; failures logged as one line."""
+
     daemon_threads = True
     allow_reuse_address = True
+    request_queue_size = LISTEN_BACKLOG
 
-    def __init__(self, address, scene_name: str, size: tuple[int, int], verbose: bool):
+    def __init__(self, address, scene_name: str, size: tuple[int, int], verbose: bool, request_timeout_s: float):
         self.scene_name = scene_name
         self.size = size
         self.verbose = verbose
+        self.request_timeout_s = request_timeout_s
+        self._slots = threading.BoundedSemaphore(MAX_CONNECTIONS)
         super().__init__(address, _Handler)
+        port = self.server_address[1]
+        self.own_hosts = (f"127.0.0.1:{port}", f"localhost:{port}")
+
+    def process_request(self, request, client_address):
+        self._slots.acquire()  # waits while MAX_CONNECTIONS are being answered
+        try:
+            super().process_request(request, client_address)
+        except BaseException:
+            self._slots.release()
+            raise
+
+    def process_request_thread(self, request, client_address):
+        try:
+            super().process_request_thread(request, client_address)
+        finally:
+            self._slots.release()
+
+    def shutdown_request(self, request):
+        """Close after a lingering read, so that a client still sending gets the answer, not a reset."""
+        try:
+            request.shutdown(socket.SHUT_WR)
+            request.settimeout(LINGER_S)
+            deadline, drained = time.monotonic() + LINGER_S, 0
+            while drained < LINGER_BYTES and time.monotonic() < deadline:
+                chunk = request.recv(1 << 16)
+                if not chunk:
+                    break
+                drained += len(chunk)
+        except OSError:
+            pass
+        self.close_request(request)
+
+    def handle_error(self, request, client_address):
+        """An exception outside a request's own handling: one line, no traceback; hang-ups are silent."""
+        error = sys.exc_info()[1]
+        if not isinstance(error, (ConnectionError, TimeoutError)):
+            print(f"bokehfit view: internal error on a connection: {type(error).__name__}: {error}", file=sys.stderr, flush=True)
 
 
 class ViewerServer:
     """The viewer's HTTP server on 127.0.0.1 (``port=0``: any free port).
 
+    ``request_timeout_s``: a client silent for this long is answered 408.
     Use ``serve_forever()`` in the foreground, or ``start()`` for a
     background thread (tests); ``close()`` stops it. A context manager.
 
@@ -516,15 +836,25 @@ class ViewerServer:
     http://127.0.0.1:54321/
     """
 
-    def __init__(self, port: int = 0, *, scene: str = "cornell", size: tuple[int, int] = DEFAULT_SIZE, verbose: bool = False):
+    def __init__(
+        self,
+        port: int = 0,
+        *,
+        scene: str = "cornell",
+        size: tuple[int, int] = DEFAULT_SIZE,
+        verbose: bool = False,
+        request_timeout_s: float = REQUEST_TIMEOUT_S,
+    ):
         if isinstance(port, bool) or not isinstance(port, int) or not 0 <= port <= 65535:
             raise InputError(f"port must be an integer from 0 to 65535 (got {port!r})")
+        if check_finite("request_timeout_s", request_timeout_s) <= 0:
+            raise InputError(f"request_timeout_s must be greater than 0 (got {request_timeout_s!r})")
         if scene not in SCENES or not isinstance(build_scene(scene), Scene):
             raise InputError(f"the viewer path-traces the scene 'cornell' (got {scene!r})")
         make_settings(size[0], size[1], 1)  # validates the size
         # Build the shader now: a broken install fails here, not in the browser.
         _pathtrace_source_cached(scene, False)
-        self._httpd = _HTTPServer(("127.0.0.1", port), scene, tuple(size), verbose)
+        self._httpd = _HTTPServer(("127.0.0.1", port), scene, tuple(size), verbose, float(request_timeout_s))
         self._thread: threading.Thread | None = None
 
     @property
