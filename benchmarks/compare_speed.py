@@ -6,7 +6,7 @@ Usage::
 
 Parts (b) and (c) of ``bokehfit bench`` (see :mod:`bokehfit.bench.fit` and
 :mod:`bokehfit.bench.compare` for what is measured and how): fit error against
-the fit time per photo with ``bokehfit.fit.MAX_FIT_DISCS`` as the budget knob,
+the fit time per photo with ``FitOptions.max_discs`` as the budget knob,
 then ``compare`` on a 24-MP JPEG (``--quick``: the 2-photo set, budgets 2 and 6,
 and a 4-MP JPEG), warm by stage and cold in a fresh process. The script prints
 tables and asserts nothing; ``--json`` also writes the figures.
@@ -38,11 +38,11 @@ def main() -> None:
     fits = budget_sweep(args.quick)
     compared = compare_timing(args.quick)
     result = {"fit": fits["rows"], "fit_set": fits["description"], "fit_misses": fits["misses"], "compare": compared}
-    print("\n## Fit error against fit time (bokehfit.fit.MAX_FIT_DISCS)\n")
+    print("\n## Fit error against fit time (FitOptions.max_discs)\n")
     print(fits["description"] + "\n")
     print(markdown_table(*fit_table(result)))
     for budget, names in fits["misses"].items():
-        print(f"wrong shape at MAX_FIT_DISCS={budget}: {', '.join(names)}")
+        print(f"wrong shape at max_discs={budget}: {', '.join(names)}")
     print(f"\n## compare on a {compared['megapixels']:.1f}-MP JPEG, seconds\n")
     print(markdown_table(*compare_table(result)))
     print(f"\nfound {compared['discs_found']} discs, fitted {compared['discs_fitted']}: {compared['aperture']}; "

@@ -1,7 +1,10 @@
 """The main job: photo → discs → fitted aperture → rendered kernel → metrics (design.md §7).
 
-:func:`compare_photo` runs the stages and returns a :class:`Comparison`, which
-converts to the ``bokehfit compare --json`` document (schema_version 1).
+:func:`compare_photo` runs the stages and returns a :class:`Comparison`: the
+one result object that the JSON document (schema_version 2, design.md §7b), the
+text summary and the HTML report are all rendered from, on every outcome
+(``fitted``, ``unsure``, ``no_fit``, ``no_discs``), so one quantity has one
+number everywhere.
 """
 
 from __future__ import annotations
@@ -15,19 +18,42 @@ import numpy as np
 from skimage import measure
 
 from bokehfit import __version__
-from bokehfit.discs import DiscSearch, find_discs
+from bokehfit.apertures import Aperture
+from bokehfit.discs import DEFAULT_MIN_DIAMETER_PX, Disc, DiscSearch, find_discs
 from bokehfit.discs.measure import RESOLVABLE_PX
 from bokehfit.errors import InputError
-from bokehfit.fit import ApertureFit, fit_aperture
+from bokehfit.fit import LENS_FEATURES, ApertureFit, FailedFit, FitOptions, fit_aperture
+from bokehfit.gpu import AdapterChoice
 from bokehfit.io import Photo, load_photo
 from bokehfit.kernels import Kernel, compute_kernel
 from bokehfit.metrics import METRICS, angle_error, compare_outlines
 from bokehfit.metrics.outlines import resample
-from bokehfit.optics import LENS_MODELS, SIZE_CONVENTIONS, circumscribed_fstop, fstop_from_coc, pixel_pitch_mm
+from bokehfit.optics import (
+    LENS_MODELS,
+    SIZE_CONVENTIONS,
+    circumscribed_fstop,
+    fstop_from_coc,
+    light_distance_from_coc,
+    pixel_pitch_mm,
+)
 
-__all__ = ["SCHEMA_VERSION", "Geometry", "FStop", "Comparison", "compare_photo", "estimate_fstop", "judge", "resolve_geometry"]
+__all__ = [
+    "SCHEMA_VERSION",
+    "Geometry",
+    "FStop",
+    "Comparison",
+    "compare_photo",
+    "disc_problems",
+    "estimate_fstop",
+    "evidence_words",
+    "judge",
+    "resolve_geometry",
+]
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
+#: Evidence in words for a BIC margin (Kass & Raftery 1995, "Bayes factors",
+#: J. Am. Stat. Assoc. 90:773, section 3.2, on the scale 2·ln B ≈ ΔBIC).
+EVIDENCE_WORDS = ((2.0, "barely any"), (6.0, "positive"), (10.0, "strong"), (math.inf, "very strong"))
 #: L1 tolerance of the matched kernel rendered on the GPU: its 50 % outline is
 #: what the metrics use, and the sample count follows from the convergence model.
 KERNEL_TOLERANCE = 0.01
@@ -52,6 +78,8 @@ class Geometry:
     focus_distance_m: float | None
     light_distance_m: float
     sources: dict[str, str]
+    frame: str | None = None  #: how the file's pixels relate to the sensor (downscaled, cropped)
+    pixel_pitch_mm: float | None = None  #: sensor width over the image's long side
 
     def to_json(self) -> dict:
         return {
@@ -60,27 +88,49 @@ class Geometry:
             "focus_distance_m": self.focus_distance_m,
             "light_distance_m": None if math.isinf(self.light_distance_m) else self.light_distance_m,
             "sources": self.sources,
+            "frame": self.frame,
+            "pixel_pitch_mm": None if self.pixel_pitch_mm is None else round(self.pixel_pitch_mm, 6),
         }
 
 
 @dataclass(frozen=True)
 class FStop:
-    """The f-stop estimate, or None with the reason."""
+    """The f-stop estimate (or the bound it implies), or None with the reason.
+
+    ``bound`` is None when ``value`` is the f-stop itself (the lights' distance is
+    known) and ``"upper"`` when it is the largest f-stop the discs allow (the lights'
+    distance is unknown: lights behind the focus plane at any finite distance give a
+    smaller f-stop than lights at infinity). ``exif_fnumber`` is EXIF's FNumber;
+    ``light_distances_m`` the distance of each disc's light that EXIF's FNumber implies
+    (by disc index; None where no light on that side of the focus plane makes so large
+    a disc); ``consistency`` says, when not None, that EXIF's FNumber, the focus
+    distance and the fitted size disagree with every light distance.
+    """
 
     value: float | None
     uncertainty: float | None
     reason: str | None
     convention: str
     lens_model: str
+    bound: str | None = None
+    meaning: str | None = None
+    exif_fnumber: float | None = None
+    light_distances_m: dict[int, float | None] = field(default_factory=dict)
+    consistency: str | None = None
 
 
 @dataclass
 class Comparison:
-    """Everything ``compare`` found; ``to_json`` gives the design.md §7 document."""
+    """Everything ``compare`` found: the one result that the JSON, summary and report render.
+
+    ``status`` is ``fitted`` (a sure fit), ``unsure`` (a fit with ``doubts``),
+    ``no_fit`` (discs were found but no model explains them) or ``no_discs``
+    (nothing usable was found); ``reason`` says why in one sentence (None when fitted).
+    """
 
     photo: Photo
     search: DiscSearch
-    fit: ApertureFit
+    fit: ApertureFit | FailedFit
     kernel: Kernel | None
     geometry: Geometry
     fstop: FStop
@@ -95,58 +145,231 @@ class Comparison:
     def acceptable(self) -> bool:
         return bool(self.fit) and self.rejection is None
 
-    def aperture_json(self) -> dict:
+    @property
+    def status(self) -> str:
+        if not self.fit:
+            return "no_discs"
+        if self.rejection:
+            return "no_fit"
+        return "unsure" if self.doubts else "fitted"
+
+    @property
+    def reason(self) -> str | None:
+        """Why the result is not a sure fit, in one sentence (None when it is)."""
+        status = self.status
+        if status == "no_discs":
+            if not self.search:
+                return f"no bokeh disc found in {self.photo.path.name}: {self.search.reason}"
+            return self.fit.reason
+        if status == "no_fit":
+            return self.rejection
+        if status == "unsure":
+            return "unsure because " + " and ".join(self.doubts)
+        return None
+
+    @property
+    def verdict(self) -> str:
+        """The verdict and its confidence in words, for people (the report's first line)."""
+        status = self.status
+        if status == "no_discs":
+            return f"No usable disc: {self.reason}."
+        if status == "no_fit":
+            return f"No acceptable fit: {self.rejection}."
         fit = self.fit
-        aperture = fit.aperture
-        symmetry = aperture.symmetry_deg
-        blades = aperture.blades
+        what = _describe(self.aperture_json())
+        margin = fit.margin_bic
+        if margin is None:
+            evidence = "only one model was tried"
+        else:
+            evidence = f"{evidence_words(margin)} evidence over the {fit.candidates[1].family.name} (ΔBIC {margin:.0f})"
+        agree = f"{len(fit.disc_fits)} disc{'s' if len(fit.disc_fits) != 1 else ''} {'agree' if len(fit.disc_fits) != 1 else 'fitted'}"
+        if status == "fitted":
+            return f"Sure: {what}; {agree}, {evidence}."
+        return f"Unsure: {what}, because {' and '.join(self.doubts)} ({agree}, {evidence})."
+
+    def kernel_json(self) -> dict | None:
+        """The kernel drawn and measured: the reported aperture, at the angle the discs show."""
+        kernel = self.kernel
+        if kernel is None:
+            return None
+        drawn = kernel.aperture
         return {
-            "shape": aperture.shape,
-            "blades": blades,
-            "aspect": aperture.aspect,
-            "angle_deg": None if symmetry is None else round(aperture.canonical_angle_deg, 3),
-            "symmetry_deg": symmetry,
-            "angle_uncertainty_deg": None if fit.angle_uncertainty_deg is None else round(fit.angle_uncertainty_deg, 4),
-            "diameter_px": round(fit.diameter_px, 3),
-            "diameter_uncertainty_px": round(fit.diameter_uncertainty_px, 3),
-            "edge_blur_px": round(fit.blur_px, 3),
+            "shape": drawn.shape,
+            "blades": drawn.blades,
+            "angle_deg": None if drawn.symmetry_deg is None else round(drawn.canonical_angle_deg, 3),
+            "diameter_px": round(kernel.diameter_px, 3),
+            "size_px": int(kernel.image.shape[0]),
+            "samples": int(kernel.samples),
+            "time_s": round(kernel.time_s, 4),
+        }
+
+    def aperture_json(self) -> dict:
+        """design.md §7 ``aperture`` with the §7b keys; every fitted key is null when nothing was fitted."""
+        fit = self.fit
+        fstop = {
             "fstop": None if self.fstop.value is None else round(self.fstop.value, 3),
             "fstop_uncertainty": None if self.fstop.uncertainty is None else round(self.fstop.uncertainty, 3),
             "fstop_reason": self.fstop.reason,
+            "fstop_bound": self.fstop.bound,
+            "fstop_meaning": self.fstop.meaning,
+            "exif_fnumber": self.fstop.exif_fnumber,
+            "fstop_consistency": self.fstop.consistency,
             "size_convention": self.fstop.convention,
             "lens_model": self.fstop.lens_model,
-            "focus_side": fit.focus_side,
-            "angle_note": _angle_note(fit),
-            "sure": not self.doubts,
-            "doubts": self.doubts,
-            "message": fit.message,
-            "candidates": [c.to_json() for c in fit.candidates],
         }
+        if not fit:
+            data = {key: None for key in ("shape", "blades", "aspect", "angle_deg", "symmetry_deg",
+                                           "angle_uncertainty_deg", "diameter_px", "diameter_uncertainty_px",
+                                           "edge_blur_px", "angle_note", "message")}
+            for name in LENS_FEATURES:
+                data[name] = data[f"{name}_uncertainty"] = None
+            data.update(fstop, focus_side=None, sure=False, doubts=[], discs_fitted=0, candidates=[])
+            return data
+        data = fit.to_json()
+        data.update(fstop, angle_note=_angle_note(fit), sure=not self.doubts, doubts=self.doubts)
+        return data
+
+    def disc_json(self, disc: Disc) -> dict:
+        """One disc: as ``bokehfit discs`` reports it, plus ``used`` (fitted) and its fit."""
+        fitted = self.fit.disc_fit(disc)
+        entry = disc.to_json()
+        entry["usable"] = bool(disc.usable)
+        entry["used"] = fitted is not None
+        entry["rejected_because"] = disc_problems(disc)
+        entry["fit_diameter_px"] = None if fitted is None else round(fitted.diameter_px, 3)
+        if fitted is not None and fitted.angle_deg is not None:
+            entry["angle_deg"] = round(fitted.angle_deg, 3)
+        entry.update({k: _round(v) for k, v in self.disc_metrics.get(disc.index, {}).items()})
+        depth = self.fstop.light_distances_m.get(disc.index) if fitted is not None else None
+        entry["depth_m"] = None if depth is None else round(depth, 4)
+        return entry
 
     def to_json(self, command_line: str) -> dict:
-        used = {item.disc.index for item in self.fit.disc_fits}
-        discs = []
-        for disc in self.search.discs:
-            fitted = self.fit.disc_fit(disc)
-            entry = disc.to_json()
-            entry["used"] = disc.index in used
-            if fitted is not None:
-                entry["angle_deg"] = None if fitted.angle_deg is None else round(fitted.angle_deg, 3)
-                entry["fit_diameter_px"] = round(fitted.diameter_px, 3)
-            entry.update({k: _round(v) for k, v in self.disc_metrics.get(disc.index, {}).items()})
-            discs.append(entry)
+        """The ``compare --json`` document, schema_version 2 (design.md §7b), on every outcome."""
         return {
             "schema_version": SCHEMA_VERSION,
             "bokehfit_version": __version__,
             "command_line": command_line,
+            "status": self.status,
+            "reason": self.reason,
+            "verdict": self.verdict,
             "input": self.photo.input_json(),
             "geometry": self.geometry.to_json(),
+            "detection": {"candidates": self.search.candidates, "rejected": dict(self.search.rejected),
+                          "resolvable_px": RESOLVABLE_PX},
             "aperture": self.aperture_json(),
-            "discs": discs,
+            "kernel": self.kernel_json(),
+            "discs": [self.disc_json(disc) for disc in self.search.discs],
             "metrics": {k: _round(v) for k, v in self.metrics.items()},
             "timing_s": {k: round(v, 4) for k, v in self.timing_s.items()},
             "device": self.device,
         }
+
+    def summary(self) -> str:
+        """The result in a few lines for the terminal, rendered from :meth:`to_json`'s numbers."""
+        data = self.to_json("")
+        photo, discs = data["input"], data["discs"]
+        usable, used = sum(d["usable"] for d in discs), sum(d["used"] for d in discs)
+        lines = [self.verdict,
+                 f"{self.photo.path.name}: {photo['width']}×{photo['height']}, {len(discs)} discs "
+                 f"({usable} usable, {used} used in the fit, {len(discs) - usable} rejected)"]
+        lines.extend(f"note: {note}" for note in photo["notes"])
+        lines.extend(geometry_lines(data))
+        aperture = data["aperture"]
+        if aperture["shape"] is None:
+            if aperture["exif_fnumber"] is not None:
+                lines.append(f"EXIF: f/{aperture['exif_fnumber']:g} (no f-stop fitted: {aperture['fstop_reason']})")
+            return "\n".join(lines)
+        lines.append(f"aperture: {_describe(aperture)}, disc {_fmt(aperture['diameter_px'], 2)} "
+                     f"± {_fmt(aperture['diameter_uncertainty_px'], 2)} px")
+        lines.append("f-stop: " + fstop_text(aperture))
+        lines.extend(self.fstop_lines(data))
+        if aperture["angle_note"]:
+            lines.append(aperture["angle_note"])
+        ranked = ", ".join(f"{c['name']} (ΔBIC {c['delta_bic']:.0f})" for c in aperture["candidates"][1:])
+        lines.append(f"runners-up: {ranked or 'none'}")
+        lines.append("metrics (discs vs kernel, median): " + ", ".join(
+            f"{k} {v:.4f}" for k, v in data["metrics"].items() if v is not None))
+        lines.append("time: " + ", ".join(f"{k} {v:.2f} s" for k, v in data["timing_s"].items())
+                     + f"; kernel on {data['device'].get('adapter')}")
+        return "\n".join(lines)
+
+
+    def fstop_lines(self, data: dict) -> list[str]:
+        """EXIF's FNumber beside the fitted f-stop, the light distances it implies, and any disagreement."""
+        aperture, exif = data["aperture"], data["input"]["exif"]
+        lines = []
+        if aperture["exif_fnumber"] is not None:
+            lens = f", lens {exif['lens']}" if exif.get("lens") else ""
+            lines.append(f"EXIF: f/{aperture['exif_fnumber']:g}{lens}")
+            depths = [d["depth_m"] for d in data["discs"] if d["used"]]
+            known = [d for d in depths if d is not None]
+            if known:
+                lines.append(f"lights' distance implied by EXIF f/{aperture['exif_fnumber']:g}: median "
+                             f"{float(np.median(known)):.3g} m, {min(known):.3g}–{max(known):.3g} m over {len(known)} of "
+                             f"{len(depths)} fitted discs (per disc: depth_m in the JSON)")
+        if aperture["fstop_consistency"]:
+            lines.append("inconsistent: " + aperture["fstop_consistency"])
+        return lines
+
+
+def fstop_text(aperture: dict) -> str:
+    """The f-stop for people from the JSON's aperture: a value, a bound (said as one), or why it is unknown."""
+    if aperture["fstop"] is None:
+        return f"unknown: {aperture['fstop_reason']}"
+    value = f"f/{aperture['fstop']:.2f} ± {aperture['fstop_uncertainty']:.2f}"
+    how = f"{aperture['size_convention']}, {aperture['lens_model']} lens"
+    if aperture.get("fstop_bound") == "upper":
+        return f"at most {value} ({how}; {aperture['fstop_meaning']})"
+    return f"{value} ({how})"
+
+
+def geometry_lines(data: dict) -> list[str]:
+    """The geometry behind the f-stop, each value with its source, from the JSON."""
+    geometry = data["geometry"]
+    sources = geometry["sources"]
+    parts = []
+    for key, label, unit in (("focal_length_mm", "focal length", "mm"), ("sensor_width_mm", "sensor width", "mm"),
+                             ("focus_distance_m", "focus distance", "m"), ("light_distance_m", "lights' distance", "m")):
+        value = geometry[key]
+        shown = "unknown" if value is None else f"{value:g} {unit}"
+        if key == "light_distance_m" and value is None:
+            shown = "unknown"
+        parts.append(f"{label} {shown} [{sources.get(key, 'unknown')}]")
+    lines = ["geometry: " + "; ".join(parts)]
+    if geometry.get("frame"):
+        lines.append(f"frame: {geometry['frame']}")
+    for ignored in data["input"]["exif"].get("ignored", []):
+        lines.append(f"EXIF value ignored: {ignored}")
+    return lines
+
+
+def _fmt(value, digits: int) -> str:
+    return "—" if value is None else f"{value:.{digits}f}"
+
+
+def _describe(aperture: dict) -> str:
+    """'hexagon at 15.02° ± 0.05°' from the JSON's aperture (its numbers, rounded for people)."""
+    name = Aperture.from_json(aperture).display_name
+    if aperture["aspect"] is not None:
+        name += f" (aspect {aperture['aspect']:.2f})"
+    if aperture["angle_deg"] is None:
+        return name
+    return f"{name} at {aperture['angle_deg']:.2f}° ± {_fmt(aperture['angle_uncertainty_deg'], 2)}°"
+
+
+def evidence_words(delta_bic: float) -> str:
+    """How strongly a BIC margin favours the winner, in words (Kass & Raftery 1995)."""
+    return next(words for limit, words in EVIDENCE_WORDS if delta_bic < limit)
+
+
+def disc_problems(disc: Disc) -> list[str]:
+    """Why a disc is not usable, in words shared by ``discs`` and ``compare`` (empty when usable)."""
+    problems = [word for word, flag in (("saturated", disc.saturated), ("cut by the frame", disc.clipped),
+                                        ("overlapping", disc.overlaps)) if flag]
+    if not disc.resolvable:
+        problems.append(f"under {RESOLVABLE_PX:g} px")
+    return problems
 
 
 def _round(value):
@@ -155,10 +378,9 @@ def _round(value):
 
 def _angle_note(fit: ApertureFit) -> str | None:
     aperture = fit.aperture
-    symmetry = aperture.symmetry_deg
-    if symmetry is None or fit.focus_side != "unknown" or (180.0 % symmetry) == 0.0:
+    if not aperture.odd_symmetry or fit.focus_side != "unknown":
         return None
-    other = (aperture.angle_deg + 180.0) % symmetry
+    other = aperture.near().canonical_angle_deg
     return (
         f"odd symmetry: lights behind the focus plane give {aperture.canonical_angle_deg:.2f}°, "
         f"lights in front of it {other:.2f}° (pass --focus-side to choose)"
@@ -187,31 +409,101 @@ def resolve_geometry(
         sources[name] = "unknown"
         return None
 
-    focal = pick("focal_length_mm", focal_length_mm, exif.focal_length_mm, "EXIF FocalLength")
-    sensor = pick("sensor_width_mm", sensor_width_mm, exif.sensor_width_mm, f"EXIF: {exif.sensor_width_source}")
-    focus = pick("focus_distance_m", focus_distance_m, exif.focus_distance_m, "EXIF focus distance")
-    sources["light_distance_m"] = "command line" if not math.isinf(light_distance_m) else "default (infinity)"
-    return Geometry(focal, sensor, focus, light_distance_m, sources)
+    known = exif.sources
+    focal = pick("focal_length_mm", focal_length_mm, exif.focal_length_mm, known.get("focal_length_mm", "EXIF FocalLength"))
+    sensor = pick("sensor_width_mm", sensor_width_mm, exif.sensor_width_mm, exif.sensor_width_source)
+    focus = pick("focus_distance_m", focus_distance_m, exif.focus_distance_m, known.get("focus_distance_m", "EXIF"))
+    sources["light_distance_m"] = "command line" if not math.isinf(light_distance_m) else "unknown (f-stop given as a bound)"
+    frame = exif.frame if sensor_width_mm is None else "sensor width from the command line: taken as the file's long side"
+    pitch = None if sensor is None else pixel_pitch_mm(sensor, photo.width, photo.height)
+    return Geometry(focal, sensor, focus, light_distance_m, sources, frame, pitch)
 
 
-def estimate_fstop(fit: ApertureFit, photo: Photo, geometry: Geometry, lens_model: str, convention: str) -> FStop:
-    """The aperture's f-stop from the fitted diameter, or None with the reason."""
+def estimate_fstop(
+    fit: ApertureFit, photo: Photo, geometry: Geometry, lens_model: str, convention: str, focus_side: str | None = None
+) -> FStop:
+    """The aperture's f-stop from the fitted diameter, or the bound it implies, or None with the reason.
+
+    With the lights' distance known the value is the f-stop. Without it, ``value`` is
+    the f-stop for lights at infinity and ``bound`` is ``"upper"``: lights behind the
+    focus plane at a finite distance d make the same disc at the smaller f-stop
+    ``N_inf · (1 − d_f/d)``. Lights in front of the focus plane (``focus_side="near"``)
+    allow any f-stop up to ``f / c`` (a light at the lens). With EXIF's FNumber known,
+    each fitted disc's light distance follows from it (:func:`light_distance_from_coc`),
+    and where none can make the discs so large, ``consistency`` says so.
+    """
     if lens_model not in LENS_MODELS:
         raise InputError(f"lens model must be one of {', '.join(LENS_MODELS)} (got {lens_model!r})")
     if convention not in SIZE_CONVENTIONS:
         raise InputError(f"size convention must be one of {', '.join(SIZE_CONVENTIONS)} (got {convention!r})")
+    side = focus_side or getattr(fit, "focus_side", "unknown")
+    exif_n = photo.exif.fnumber
     missing = [name for name in ("focal_length_mm", "sensor_width_mm", "focus_distance_m") if getattr(geometry, name) is None]
     if missing:
         flags = ", ".join("--" + name.replace("_", "-") for name in missing)
-        return FStop(None, None, f"unknown {', '.join(missing)} (give {flags})", convention, lens_model)
+        return FStop(None, None, f"unknown {', '.join(missing)} (give {flags})", convention, lens_model, exif_fnumber=exif_n)
+    f, focus = geometry.focal_length_mm, geometry.focus_distance_m
+    if focus * 1000.0 <= f:
+        if "command line" in (geometry.sources.get("focus_distance_m"), geometry.sources.get("focal_length_mm")):
+            raise InputError(f"--focus-distance-m ({focus:g} m) must be longer than the focal length ({f:g} mm): "
+                             "nothing can be focused closer")
+        return FStop(None, None, f"the focus distance ({focus:g} m, {geometry.sources.get('focus_distance_m')}) is not longer "
+                     f"than the focal length ({f:g} mm): give --focus-distance-m", convention, lens_model, exif_fnumber=exif_n)
     pitch = pixel_pitch_mm(geometry.sensor_width_mm, photo.width, photo.height)
-    value = fstop_from_coc(
-        fit.diameter_px * pitch, geometry.focal_length_mm, geometry.focus_distance_m, geometry.light_distance_m, lens_model
-    )
+    relative = fit.diameter_uncertainty_px / fit.diameter_px if fit.diameter_px else 0.0
+    coc = fit.diameter_px * pitch
+    bound = meaning = None
+    try:
+        if math.isinf(geometry.light_distance_m) and side == "near":
+            value = f / coc  # a light at the lens: the largest aperture number that makes the disc
+            bound, meaning = "upper", "lights in front of the focus plane at an unknown distance: any smaller f-stop fits"
+        else:
+            value = fstop_from_coc(coc, f, focus, geometry.light_distance_m, lens_model)
+            if math.isinf(geometry.light_distance_m):
+                bound = "upper"
+                meaning = ("the lights' distance is unknown: this is the f-stop for lights at infinity; lights behind the "
+                           "focus plane at any finite distance give a smaller f-stop (give --light-distance-m)")
+    except InputError as error:
+        return FStop(None, None, str(error), convention, lens_model, exif_fnumber=exif_n)
+    focus_range = photo.exif.focus_distance_range_m
+    if focus_range and geometry.sources.get("focus_distance_m") != "command line" and not (
+            math.isinf(geometry.light_distance_m) and side == "near"):
+        # A focus distance recorded as a range (Canon): its ends bracket the f-stop; half the spread
+        # joins the size's uncertainty (independent errors, added in quadrature).
+        try:
+            ends = [fstop_from_coc(coc, f, end, geometry.light_distance_m, lens_model) for end in focus_range]
+        except InputError:
+            ends = None
+        if ends:
+            relative = math.hypot(relative, abs(ends[1] - ends[0]) / (2.0 * value))
+            range_note = (f"the focus distance is a range, {focus_range[0]:g}–{focus_range[1]:g} m, which alone spans "
+                          f"f/{min(ends):.2f}–f/{max(ends):.2f} (in the uncertainty)")
+            meaning = range_note if meaning is None else f"{meaning}; {range_note}"
+    equal_area = value
     if convention == "circumscribed":
         value = circumscribed_fstop(value, fit.aperture)
-    relative = fit.diameter_uncertainty_px / fit.diameter_px if fit.diameter_px else 0.0
-    return FStop(value, value * relative, None, convention, lens_model)
+    distances: dict[int, float | None] = {}
+    consistency = None
+    if exif_n is not None:
+        wanted = "near" if side == "near" else "far"
+        for item in fit.disc_fits:
+            fitted = fit.disc_fit(item.disc)
+            if fitted is None or not fitted.diameter_px > 0:
+                continue
+            distances[item.disc.index] = light_distance_from_coc(fitted.diameter_px * pitch, exif_n, f, focus, wanted, lens_model)
+        if side != "near" and math.isinf(geometry.light_distance_m) and exif_n > equal_area * (1.0 + 2.0 * relative):
+            consistency = (
+                f"EXIF's f/{exif_n:g} cannot make discs of {fit.diameter_px:.1f} px at {f:g} mm focused at {focus:g} m "
+                f"from lights behind the focus plane at any distance (at most f/{equal_area:.2f}); lights in front of it, "
+                "wrong metadata (focus distance, sensor width), a crop, a teleconverter or a lens far from thin would explain it"
+            )
+        elif not math.isinf(geometry.light_distance_m) and abs(exif_n - equal_area) > 2.0 * equal_area * relative + 0.15 * exif_n:
+            consistency = (
+                f"EXIF's f/{exif_n:g} and the fitted f/{equal_area:.2f} for lights at {geometry.light_distance_m:g} m disagree: "
+                "check the light distance, the focus distance and the sensor width (a crop, a teleconverter or a lens far "
+                "from thin would also explain it)"
+            )
+    return FStop(value, value * relative, None, convention, lens_model, bound, meaning, exif_n, distances, consistency)
 
 
 def _kernel_outline(kernel: Kernel) -> np.ndarray:
@@ -227,7 +519,7 @@ def disc_metrics(comparison_fit: ApertureFit, kernel_outline: np.ndarray) -> dic
     """Every metric between each fitted disc's outline and the matched kernel's outline."""
     out = {}
     symmetry = comparison_fit.aperture.symmetry_deg
-    seen = comparison_fit.candidates[0].angle_deg
+    seen = comparison_fit.seen_angle_deg
     for item in comparison_fit.disc_fits:
         values = compare_outlines(
             resample(item.disc.outline_xy, METRIC_POINTS), kernel_outline, rotation_within_deg=ALIGNMENT_SEARCH_DEG
@@ -250,16 +542,22 @@ def compare_photo(
     sensor_width_mm: float | None = None,
     focus_distance_m: float | None = None,
     light_distance_m: float = math.inf,
-    min_diameter_px: float = RESOLVABLE_PX,
+    min_diameter_px: float = DEFAULT_MIN_DIAMETER_PX,
     max_diameter_px: float = 500.0,
+    fit_options: FitOptions | None = None,
     progress=None,
+    adapter: AdapterChoice | None = None,
 ) -> Comparison:
     """Run every stage of ``bokehfit compare`` on one photo.
 
     ``progress``, when given, is called with a stage name as each one starts
-    and with (done, total) while discs are fitted.
-    Raises ``InputError`` for unreadable input; a photo with no fittable disc
-    returns a Comparison whose ``fit`` is falsy.
+    and with (done, total) while discs are fitted. ``min_diameter_px`` is the
+    detection's, shared with ``bokehfit discs`` so both find the same discs;
+    discs under ``RESOLVABLE_PX`` are found but not usable. ``fit_options`` is
+    the fit's budget (:class:`bokehfit.fit.FitOptions`); ``adapter`` chooses
+    the GPU of the kernel (:func:`bokehfit.gpu.get_gpu`).
+    Raises ``InputError`` for unreadable input; every other outcome is a
+    Comparison with its ``status`` and ``reason``.
     """
     notify = progress or (lambda *args: None)
     timing = {}
@@ -278,29 +576,29 @@ def compare_photo(
     search = find_discs(photo.luminance, photo.clipped, min_diameter_px=min_diameter_px, max_diameter_px=max_diameter_px)
     timing["detect"] = search.time_s
     notify("fit")
-    fit = fit_aperture(photo.luminance, search.discs, shapes=shapes, focus_side=focus_side, progress=progress)
+    fit = fit_aperture(photo.luminance, search.discs, shapes=shapes, focus_side=focus_side, options=fit_options,
+                       progress=progress)
     timing["fit"] = fit.time_s
     kernel = None
-    fstop = FStop(None, None, "no aperture was fitted", size_convention, lens_model)
+    fstop = FStop(None, None, "no aperture was fitted", size_convention, lens_model, exif_fnumber=photo.exif.fnumber)
     metrics: dict[str, float | None] = {name: None for name in METRICS}
     per_disc: dict[int, dict[str, float]] = {}
     device = {"adapter": None, "backend": None}
     if fit:
-        fstop = estimate_fstop(fit, photo, geometry, lens_model, size_convention)
+        fstop = estimate_fstop(fit, photo, geometry, lens_model, size_convention, focus_side)
         notify("render")
         aperture = fit.aperture
-        seen_angle = fit.candidates[0].angle_deg or 0.0
+        # The reported aperture as the discs show it: the consensus angle (turned back for near discs).
+        seen_angle = fit.seen_angle_deg or 0.0
         scale = fit.diameter_px * math.sqrt(math.pi) / 2.0
         size = 2 * math.ceil(aperture.extent() * scale) + 9
         kernel = compute_kernel(
-            aperture.shape,
-            seen_angle,
-            fit.diameter_px,
-            size,
+            aperture.replace(angle_deg=seen_angle),
+            diameter_px=fit.diameter_px,
+            size=size,
             method="mc",
             tolerance=KERNEL_TOLERANCE,
-            blades=aperture.blades if aperture.shape == "ngon" else None,
-            aspect=aperture.aspect,
+            adapter=adapter,
         )
         timing["render"] = kernel.time_s + kernel.setup_s
         adapter, _, backend = (kernel.device or "").rpartition(" (")
@@ -323,15 +621,16 @@ def judge(fit: ApertureFit, metrics: dict[str, float | None]) -> tuple[list[str]
     doubts = []
     if not fit.sure:
         doubts.append(f"the runner-up ({fit.candidates[1].family.name}) fits almost as well")
-    if len(fit.disc_fits) < MIN_SURE_DISCS:
-        doubts.append(f"only {len(fit.disc_fits)} disc(s) could be fitted")
+    fitted = len(fit.disc_fits)
+    if fitted < MIN_SURE_DISCS:
+        doubts.append(f"only {fitted} disc{' was' if fitted == 1 else 's were'} clean enough to fit")
     iou = metrics.get("iou")
     if iou is not None and iou < MIN_SURE_IOU:
-        doubts.append(f"the discs match the kernel loosely (median IoU {iou:.2f} < {MIN_SURE_IOU})")
+        doubts.append(f"the discs match the kernel only loosely (median overlap IoU {iou:.2f}, {MIN_SURE_IOU} for a sure fit)")
     rejection = None
     if iou is not None and iou < MIN_ACCEPTABLE_IOU:
         rejection = (
-            f"no acceptable fit: the discs match the best model ({fit.family.name}) poorly "
-            f"(median IoU {iou:.2f} < {MIN_ACCEPTABLE_IOU})"
+            f"the discs' outlines do not match even the best model ({fit.family.name}) "
+            f"(median overlap IoU {iou:.2f}, at least {MIN_ACCEPTABLE_IOU} needed)"
         )
     return doubts, rejection

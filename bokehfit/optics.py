@@ -16,6 +16,9 @@ of diameter f/N, so every shape passes the same light. The circumscribed
 convention (the shape's circumscribed circle has diameter f/N) gives a larger
 number for polygons: N_circ = N_eq / (R·√π), with R the circumradius of the
 unit-area shape.
+
+Every length and the f-stop must lie in its range of ``bokehfit.validate.RANGES``
+(e.g. focal length 1 mm to 10 m); the error names the parameter and the range.
 """
 
 from __future__ import annotations
@@ -23,20 +26,27 @@ from __future__ import annotations
 import math
 
 from bokehfit.apertures import Aperture
-from bokehfit.errors import InputError, check_positive
+from bokehfit.errors import InputError
+from bokehfit.validate import check
 
-__all__ = ["LENS_MODELS", "SIZE_CONVENTIONS", "coc_mm", "fstop_from_coc", "circumscribed_fstop", "pixel_pitch_mm"]
+__all__ = [
+    "LENS_MODELS",
+    "SIZE_CONVENTIONS",
+    "coc_mm",
+    "fstop_from_coc",
+    "circumscribed_fstop",
+    "light_distance_from_coc",
+    "pixel_pitch_mm",
+]
 
 LENS_MODELS = ("thin", "pinhole")
 SIZE_CONVENTIONS = ("equal-area", "circumscribed")
 
 
 def _check_geometry(focal_length_mm: float, focus_distance_m: float, light_distance_m: float) -> tuple[float, float, float]:
-    f = check_positive("focal_length_mm", focal_length_mm)
-    focus = check_positive("focus_distance_m", focus_distance_m) * 1000.0
-    light = float(light_distance_m)
-    if math.isnan(light) or light <= 0.0:
-        raise InputError(f"light_distance_m must be greater than 0 or inf (got {light_distance_m!r})")
+    f = check("focal_length_mm", focal_length_mm)
+    focus = check("focus_distance_m", focus_distance_m) * 1000.0
+    light = check("light_distance_m", light_distance_m)
     if focus <= f:
         raise InputError(
             f"focus distance ({focus / 1000:g} m) must be longer than the focal length ({f:g} mm): "
@@ -57,7 +67,7 @@ def _defocus_factor(f: float, focus: float, light: float, lens_model: str) -> fl
 
 def coc_mm(fstop: float, focal_length_mm: float, focus_distance_m: float, light_distance_m: float, lens_model: str = "thin") -> float:
     """Blur-disc diameter on the sensor (mm) of a point light; see the module notes."""
-    n = check_positive("fstop", fstop)
+    n = check("fstop", fstop)
     f, focus, light = _check_geometry(focal_length_mm, focus_distance_m, light_distance_m)
     return f * f / n * _defocus_factor(f, focus, light, lens_model)
 
@@ -70,12 +80,58 @@ def fstop_from_coc(
     Raises ``InputError`` where the geometry leaves the f-stop undefined (the
     light at the focus distance makes no disc).
     """
-    c = check_positive("coc", coc)
+    c = check("coc_mm", coc, name="coc")
     f, focus, light = _check_geometry(focal_length_mm, focus_distance_m, light_distance_m)
     factor = _defocus_factor(f, focus, light, lens_model)
     if factor <= 0.0:
         raise InputError("the light is at the focus distance, where it makes no blur disc: the f-stop is undefined")
     return f * f * factor / c
+
+
+def light_distance_from_coc(
+    coc: float, fstop: float, focal_length_mm: float, focus_distance_m: float, side: str = "far", lens_model: str = "thin"
+) -> float | None:
+    """The light distance (m) that makes a blur disc of ``coc`` mm at ``fstop``; inverse of :func:`coc_mm` in d.
+
+    Parameters
+    ----------
+    coc : float
+        Blur-disc diameter on the sensor, mm.
+    fstop : float
+        Equal-area f-stop.
+    focal_length_mm, focus_distance_m : float
+        The lens and where it was focused.
+    side : {"far", "near"}
+        Whether the light is behind the focus plane (d > d_f) or in front of it.
+
+    Returns
+    -------
+    float or None
+        None where no light on that side makes so large a disc: behind the focus
+        plane the disc grows towards ``f² / (N (d_f − f))`` at infinity and never
+        reaches it.
+
+    Notes
+    -----
+    With ``k = c N (d_f − f) / f²`` (thin lens; ``d_f`` for the pinhole model), the
+    disc equation ``c = (f/N) f |d − d_f| / (d (d_f − f))`` gives
+    ``d = d_f / (1 − k)`` behind the focus plane (for ``k < 1``) and
+    ``d = d_f / (1 + k)`` in front of it.
+
+    Examples
+    --------
+    >>> round(light_distance_from_coc(coc_mm(2.8, 50, 2.0, 5.0), 2.8, 50, 2.0), 6)
+    5.0
+    """
+    c = check("coc_mm", coc, name="coc")
+    n = check("fstop", fstop)
+    f, focus, _ = _check_geometry(focal_length_mm, focus_distance_m, math.inf)
+    if side not in ("far", "near"):
+        raise InputError(f"side must be one of far, near (got {side!r})")
+    k = c * n * _defocus_factor(f, focus, math.inf, lens_model) ** -1 / (f * f)
+    if side == "near":
+        return focus / (1.0 + k) / 1000.0
+    return focus / (1.0 - k) / 1000.0 if k < 1.0 else None
 
 
 def circumscribed_fstop(fstop_equal_area: float, aperture: Aperture) -> float:
@@ -85,4 +141,4 @@ def circumscribed_fstop(fstop_equal_area: float, aperture: Aperture) -> float:
 
 def pixel_pitch_mm(sensor_width_mm: float, image_width_px: int, image_height_px: int) -> float:
     """Pixel pitch from the sensor's long side and the image's long side."""
-    return check_positive("sensor_width_mm", sensor_width_mm) / max(image_width_px, image_height_px)
+    return check("sensor_width_mm", sensor_width_mm) / max(image_width_px, image_height_px)

@@ -1,38 +1,259 @@
-"""Write result files atomically, and refuse to write over an input.
+"""Write result files atomically, never over a file bokehfit did not write, and leave nothing behind.
 
 Every output goes to a temporary file in the destination's folder and is then
-renamed over the destination, so a reader never sees half a file and a crash
-never leaves one behind.
+renamed over the destination, so a reader never sees half a file.
+
+**Whose file it is.** An existing file is replaced only if it is one of
+bokehfit's own outputs. Every file bokehfit writes carries a mark, and
+:func:`is_bokehfit_output` looks for it (the writers here add it):
+
+========  =====================================================================
+``.json``  a ``"bokehfit_version"`` key in the first 64 KiB (every JSON output has one)
+``.html``  ``<meta name="generator" content="bokehfit VERSION">`` in the first 64 KiB
+``.png``   a ``tEXt`` chunk ``Software`` = ``bokehfit VERSION`` before the image data
+``.jpg``   a comment (``COM``) segment ``bokehfit VERSION`` before the image data
+``.npy``   ``# bokehfit VERSION`` in the header's padding, a comment to ``numpy.load``
+``.exr``   a string attribute ``software`` = ``bokehfit VERSION`` in the header
+========  =====================================================================
+
+Any other existing file (a photo, notes, another program's output, a file of
+another type) is refused: :func:`check_output_path` and the writers raise
+:class:`~bokehfit.errors.InputError` naming it, and the user moves it or chooses
+another name. bokehfit never picks another name by itself.
+
+**Temporary files** are named ``.NAME.bokehfit-tmp-PID-TOKEN.SUFFIX``. A failed
+write removes its own: on any exception, on Ctrl-C, and on SIGTERM (which, while
+a write is under way in the main thread, becomes ``SystemExit(143)``). One left
+by a process that was killed outright (SIGKILL, a crash, a power cut) is removed
+by the next write into that folder, once no process with that PID is running
+(on POSIX systems; elsewhere they are left alone).
+
+**Test hook.** ``BOKEHFIT_WRITE_PAUSE_S=SECONDS`` makes every write wait that
+long between finishing its temporary file and renaming it, so that a test can
+interrupt a write at a known moment. It changes nothing else.
 """
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import os
-import tempfile
+import re
+import secrets
+import signal
+import struct
+import threading
+import time
+import zlib
 from pathlib import Path
 from typing import Callable, Iterable
 
 import numpy as np
 
-from bokehfit.errors import InputError
+from bokehfit import __version__
+from bokehfit.errors import InputError, check_finite
 
 __all__ = [
+    "GENERATOR",
+    "HTML_GENERATOR_META",
+    "KERNEL_FORMATS",
+    "WRITE_PAUSE_ENV",
     "check_output_path",
+    "check_replaceable",
+    "is_bokehfit_output",
+    "remove_stale_temporaries",
     "write_atomic",
     "write_bytes_atomic",
+    "write_exr",
     "write_json",
     "write_png",
     "write_kernel_image",
-    "KERNEL_FORMATS",
 ]
 
 #: Kernel file formats by suffix.
 KERNEL_FORMATS = (".npy", ".png", ".exr")
 
+#: The mark of bokehfit's outputs (the program and its version).
+GENERATOR = f"bokehfit {__version__}"
+
+#: The element that marks an HTML page as bokehfit's; added to every ``.html`` written here.
+HTML_GENERATOR_META = f'<meta name="generator" content="{GENERATOR}">'
+
+#: Environment variable of the test hook: seconds to wait before each rename.
+WRITE_PAUSE_ENV = "BOKEHFIT_WRITE_PAUSE_S"
+
+#: How much of a file is read to find the mark.
+_HEAD_BYTES = 1 << 16
+
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+_NPY_MAGIC = b"\x93NUMPY"
+_EXR_MAGIC = b"\x76\x2f\x31\x01"
+_TEMPORARY = re.compile(r"^\..+\.bokehfit-tmp-(?P<pid>\d+)-[0-9a-f]+(\.[^.]*)?$")
+
+
+# --------------------------------------------------------------------------------------
+# The mark: one recogniser and one stamp per format
+# --------------------------------------------------------------------------------------
+
+
+def _png_chunks(data: bytes):
+    """(kind, body) of each PNG chunk before the image data (bodies may be cut at the end of ``data``)."""
+    i = len(_PNG_SIGNATURE)
+    while i + 8 <= len(data):
+        length, kind = struct.unpack(">I4s", data[i : i + 8])
+        if kind in (b"IDAT", b"IEND"):
+            return
+        yield kind, data[i + 8 : i + 8 + length]
+        i += 12 + length
+
+
+def _jpeg_segments(data: bytes):
+    """(marker, body) of each JPEG segment before the scan."""
+    i = 2
+    while i + 4 <= len(data) and data[i] == 0xFF:
+        marker = data[i + 1]
+        if marker in (0xDA, 0xD9):  # start of scan, end of image
+            return
+        (length,) = struct.unpack(">H", data[i + 2 : i + 4])
+        yield marker, data[i + 4 : i + 2 + length]
+        i += 2 + length
+
+
+def _npy_header(data: bytes) -> tuple[str, int, bytes] | None:
+    """(struct format of the header length, header start, header) of a ``.npy`` file, or None."""
+    if not data.startswith(_NPY_MAGIC) or len(data) < 10:
+        return None
+    size_format, start = ("<H", 10) if data[6] == 1 else ("<I", 12)
+    if len(data) < start:
+        return None
+    (length,) = struct.unpack_from(size_format, data, 8)
+    return size_format, start, data[start : start + length]
+
+
+def _json_is_ours(head: bytes) -> bool:
+    return b'"bokehfit_version"' in head
+
+
+def _html_is_ours(head: bytes) -> bool:
+    return b'<meta name="generator" content="bokehfit ' in head
+
+
+def _png_is_ours(head: bytes) -> bool:
+    return head.startswith(_PNG_SIGNATURE) and any(
+        kind == b"tEXt" and body.startswith(b"Software\x00bokehfit ") for kind, body in _png_chunks(head)
+    )
+
+
+def _jpeg_is_ours(head: bytes) -> bool:
+    return head.startswith(b"\xff\xd8") and any(
+        marker == 0xFE and body.startswith(b"bokehfit ") for marker, body in _jpeg_segments(head)
+    )
+
+
+def _npy_is_ours(head: bytes) -> bool:
+    header = _npy_header(head)
+    return header is not None and b"# bokehfit " in header[2]
+
+
+def _exr_is_ours(head: bytes) -> bool:
+    # Attributes are name\0 type\0 size (int32) value: software\0 string\0 <size> bokehfit ...
+    return head.startswith(_EXR_MAGIC) and re.search(rb"software\x00string\x00.{4}bokehfit ", head, re.DOTALL) is not None
+
+
+def _stamp_html(data: bytes) -> bytes:
+    if _html_is_ours(data[:_HEAD_BYTES]):
+        return data
+    meta = HTML_GENERATOR_META.encode("utf-8")
+    head = re.search(rb"<head(\s[^>]*)?>", data[:_HEAD_BYTES], re.IGNORECASE)
+    at = head.end() if head else 0
+    return data[:at] + meta + data[at:]
+
+
+def _stamp_png(data: bytes) -> bytes:
+    if not data.startswith(_PNG_SIGNATURE) or data[12:16] != b"IHDR" or _png_is_ours(data[:_HEAD_BYTES]):
+        return data
+    body = b"Software\x00" + GENERATOR.encode("latin-1", "replace")
+    chunk = struct.pack(">I", len(body)) + b"tEXt" + body + struct.pack(">I", zlib.crc32(b"tEXt" + body))
+    end = 8 + 12 + struct.unpack(">I", data[8:12])[0]  # after IHDR
+    return data[:end] + chunk + data[end:]
+
+
+def _stamp_jpeg(data: bytes) -> bytes:
+    if not data.startswith(b"\xff\xd8") or _jpeg_is_ours(data[:_HEAD_BYTES]):
+        return data
+    text = GENERATOR.encode("ascii", "replace")
+    return data[:2] + b"\xff\xfe" + struct.pack(">H", len(text) + 2) + text + data[2:]
+
+
+def _stamp_npy(data: bytes) -> bytes:
+    """The header's padding gains a comment; the header stays a multiple of 64 bytes long (NEP 1)."""
+    parsed = _npy_header(data)
+    if parsed is None or b"# bokehfit " in parsed[2]:
+        return data
+    size_format, start, header = parsed
+    header = header.rstrip(b" \n") + f" # {GENERATOR}".encode("ascii", "replace")
+    header += b" " * (-(start + len(header) + 1) % 64) + b"\n"
+    return data[:8] + struct.pack(size_format, len(header)) + header + data[start + len(parsed[2]) :]
+
+
+_RECOGNISERS: dict[str, Callable[[bytes], bool]] = {
+    ".json": _json_is_ours,
+    ".html": _html_is_ours,
+    ".htm": _html_is_ours,
+    ".png": _png_is_ours,
+    ".jpg": _jpeg_is_ours,
+    ".jpeg": _jpeg_is_ours,
+    ".npy": _npy_is_ours,
+    ".exr": _exr_is_ours,
+}
+
+_STAMPS: dict[str, Callable[[bytes], bytes]] = {
+    ".html": _stamp_html,
+    ".htm": _stamp_html,
+    ".png": _stamp_png,
+    ".jpg": _stamp_jpeg,
+    ".jpeg": _stamp_jpeg,
+    ".npy": _stamp_npy,
+}
+
+
+def is_bokehfit_output(path: str | os.PathLike) -> bool:
+    """Whether ``path`` is a file that bokehfit wrote (it carries bokehfit's mark; see the module notes).
+
+    Parameters
+    ----------
+    path : str or path-like
+        Any path; a folder, a missing or unreadable file, or a type bokehfit does not write give False.
+
+    Examples
+    --------
+    >>> is_bokehfit_output("holiday.jpg")  # doctest: +SKIP
+    False
+    """
+    recognise = _RECOGNISERS.get(Path(path).suffix.lower())
+    if recognise is None:
+        return False
+    try:
+        with open(path, "rb") as file:
+            return recognise(file.read(_HEAD_BYTES))
+    except OSError:
+        return False
+
+
+def check_replaceable(path: str | os.PathLike) -> None:
+    """``InputError`` if something that bokehfit did not write is at ``path``; nothing if it is free or ours."""
+    path = Path(path)
+    if path.is_dir():
+        raise InputError(f"output {str(path)!r} is a folder")
+    if os.path.lexists(path) and not is_bokehfit_output(path):
+        raise InputError(
+            f"output {str(path)!r} already exists and was not written by bokehfit; move it away or choose another name"
+        )
+
 
 def check_output_path(path: str | os.PathLike, suffixes: Iterable[str], inputs: Iterable[str | os.PathLike] = ()) -> Path:
-    """``path`` as a Path, or ``InputError`` if it can't be written or names an input."""
+    """``path`` as a Path, or ``InputError`` if it can't be written, names an input or holds a file not ours."""
     path = Path(path)
     suffixes = tuple(suffixes)
     if path.suffix.lower() not in suffixes:
@@ -44,39 +265,130 @@ def check_output_path(path: str | os.PathLike, suffixes: Iterable[str], inputs: 
     for source in inputs:
         if Path(source).exists() and path.exists() and path.samefile(source):
             raise InputError(f"output {str(path)!r} would overwrite the input; choose another name")
+    check_replaceable(path)
     return path
 
 
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
+# --------------------------------------------------------------------------------------
+# Temporary files
+# --------------------------------------------------------------------------------------
 
 
-def write_atomic(path: Path, write: Callable[[Path], None]) -> None:
-    """Call ``write(temporary_path)``, then rename the temporary file to ``path``."""
-    fd, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent)
-    os.close(fd)
-    os.chmod(temporary, 0o666 & ~_umask())  # mkstemp makes it private; outputs get the usual mode
+def _process_running(pid: int) -> bool:
+    """Whether a process ``pid`` may be running (True where that can't be told)."""
+    if pid == os.getpid() or os.name != "posix":
+        return True
     try:
-        write(Path(temporary))
-        os.replace(temporary, path)
-    except BaseException:
-        Path(temporary).unlink(missing_ok=True)
-        raise
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    except (OverflowError, ValueError):  # no process can have that number
+        return False
+    return True
 
 
-def write_bytes_atomic(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` atomically."""
+def remove_stale_temporaries(folder: str | os.PathLike) -> list[Path]:
+    """Remove the temporary files that killed bokehfit processes left in ``folder``; returns them."""
+    removed = []
+    try:
+        entries = list(os.scandir(folder))
+    except OSError:
+        return removed
+    for entry in entries:
+        match = _TEMPORARY.match(entry.name)
+        if match and entry.is_file(follow_symlinks=False) and not _process_running(int(match["pid"])):
+            with contextlib.suppress(OSError):
+                os.unlink(entry.path)
+                removed.append(Path(entry.path))
+    return removed
+
+
+def _new_temporary(path: Path) -> Path:
+    """Create an empty temporary file for ``path`` in its folder (usual permissions: 0o666 less the umask)."""
+    for _ in range(16):
+        temporary = path.parent / f".{path.name[:180]}.bokehfit-tmp-{os.getpid()}-{secrets.token_hex(4)}{path.suffix}"
+        try:
+            os.close(os.open(temporary, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
+            return temporary
+        except FileExistsError:
+            continue
+    raise OSError(f"could not create a temporary file beside {path}")
+
+
+@contextlib.contextmanager
+def _sigterm_raises():
+    """While inside, SIGTERM raises ``SystemExit(143)`` (main thread, default handler only), so cleanup runs."""
+    if threading.current_thread() is not threading.main_thread() or signal.getsignal(signal.SIGTERM) is not signal.SIG_DFL:
+        yield
+        return
+
+    def terminate(signum, frame):
+        raise SystemExit(128 + signum)
+
+    signal.signal(signal.SIGTERM, terminate)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
+def _pause_for_tests() -> None:
+    value = os.environ.get(WRITE_PAUSE_ENV)
+    if value:
+        seconds = check_finite(WRITE_PAUSE_ENV, value)
+        if seconds < 0:
+            raise InputError(f"{WRITE_PAUSE_ENV} must be a number of seconds >= 0 (got {value!r})")
+        time.sleep(seconds)
+
+
+# --------------------------------------------------------------------------------------
+# Writers
+# --------------------------------------------------------------------------------------
+
+
+def write_atomic(path: str | os.PathLike, write: Callable[[Path], None]) -> None:
+    """Call ``write(temporary_path)``, then rename the temporary file to ``path``.
+
+    Raises ``InputError`` (and writes nothing) if a file that bokehfit did not
+    write is at ``path``. The temporary file is removed if anything fails; stale
+    ones of killed processes in the same folder are removed first.
+    """
+    path = Path(path)
+    remove_stale_temporaries(path.parent)
+    check_replaceable(path)
+    with _sigterm_raises():
+        temporary = _new_temporary(path)
+        try:
+            write(temporary)
+            _pause_for_tests()
+            check_replaceable(path)  # a file that appeared while we wrote
+            os.replace(temporary, path)
+        except BaseException:
+            temporary.unlink(missing_ok=True)
+            raise
+
+
+def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> None:
+    """Write ``data`` to ``path`` atomically, with bokehfit's mark added where the format has one."""
+    path = Path(path)
+    stamp = _STAMPS.get(path.suffix.lower())
+    data = stamp(bytes(data)) if stamp else bytes(data)
     write_atomic(path, lambda tmp: tmp.write_bytes(data))
 
 
-def write_json(path: Path, data: dict) -> None:
-    """Write ``data`` as indented JSON, atomically."""
+def write_json(path: str | os.PathLike, data: dict) -> None:
+    """Write ``data`` as indented JSON, atomically.
+
+    ``bokehfit_version``, the mark of JSON outputs, is added first where ``data`` lacks it.
+    """
+    if "bokehfit_version" not in data:
+        data = {"bokehfit_version": __version__, **data}
     write_bytes_atomic(path, (json.dumps(data, indent=1, allow_nan=False) + "\n").encode("utf-8"))
 
 
-def write_png(path: Path, image: np.ndarray) -> None:
+def write_png(path: str | os.PathLike, image: np.ndarray) -> None:
     """Write an 8- or 16-bit image (grey, or BGR as OpenCV orders it) as PNG, atomically."""
     import cv2
 
@@ -86,23 +398,33 @@ def write_png(path: Path, image: np.ndarray) -> None:
     write_bytes_atomic(path, encoded.tobytes())
 
 
-def write_kernel_image(path: Path, kernel: np.ndarray) -> None:
+def write_exr(path: str | os.PathLike, channels: dict[str, np.ndarray]) -> None:
+    """Write float32 channels (``{"Y": ...}`` or ``{"R": ..., "G": ..., "B": ...}``) as ZIP-compressed OpenEXR."""
+    import OpenEXR
+
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage, "software": GENERATOR}
+    planes = {name: np.ascontiguousarray(plane, dtype=np.float32) for name, plane in channels.items()}
+
+    def write(tmp: Path) -> None:
+        with OpenEXR.File(header, planes) as exr:
+            exr.write(str(tmp))
+
+    write_atomic(path, write)
+
+
+def write_kernel_image(path: str | os.PathLike, kernel: np.ndarray) -> None:
     """Save a kernel: ``.npy`` raw float32, ``.png`` 16-bit scaled to its peak, ``.exr`` float32."""
+    path = Path(path)
     suffix = path.suffix.lower()
     if suffix == ".npy":
-        write_atomic(path, lambda tmp: np.save(tmp, kernel.astype(np.float32)))
+        buffer = io.BytesIO()
+        np.save(buffer, kernel.astype(np.float32))
+        write_bytes_atomic(path, buffer.getvalue())
     elif suffix == ".png":
         peak = float(kernel.max())
         scaled = np.round(kernel / peak * 65535.0) if peak > 0 else np.zeros_like(kernel)
         write_png(path, scaled.astype(np.uint16))
     elif suffix == ".exr":
-        import OpenEXR
-
-        def write(tmp: Path) -> None:
-            header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-            with OpenEXR.File(header, {"Y": np.ascontiguousarray(kernel, dtype=np.float32)}) as exr:
-                exr.write(str(tmp))
-
-        write_atomic(path, write)
+        write_exr(path, {"Y": kernel})
     else:
         raise InputError(f"kernel file must end in {', '.join(KERNEL_FORMATS)} (got {str(path)!r})")

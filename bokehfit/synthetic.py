@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bokehfit.apertures import make_aperture
+from bokehfit.apertures import image_to_aperture, make_aperture
 from bokehfit.kernels.exact import coverage
 
 __all__ = ["SyntheticDisc", "render_discs", "encode_srgb8"]
@@ -39,9 +39,9 @@ def _stamp(image: np.ndarray, disc: SyntheticDisc) -> None:
     scale = disc.diameter_px * math.sqrt(math.pi) / 2.0
     half = math.ceil(aperture.extent() * scale) + 2
     col0, row0 = round(disc.center_xy[0]), round(disc.center_xy[1])
-    # Offset of the true centre from the stamp's centre pixel, y up.
-    offset = (disc.center_xy[0] - col0, -(disc.center_xy[1] - row0))
-    stamp = coverage(aperture, scale, 2 * half + 1, flip=disc.side == "near", offset_xy=offset)
+    # Offset of the true centre from the stamp's centre pixel, in the aperture frame (y up).
+    offset = image_to_aperture((disc.center_xy[1] - row0, disc.center_xy[0] - col0))
+    stamp = coverage(aperture, scale, 2 * half + 1, flip=disc.side == "near", offset_xy=tuple(offset))
     height, width = image.shape
     top, left = row0 - half, col0 - half
     r0, c0 = max(top, 0), max(left, 0)

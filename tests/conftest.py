@@ -8,11 +8,16 @@ The harnesses build a one-line compute shader around the package's own WGSL
 (``rng.wgsl``, the generated ``shape_ids``, ``apertures.wgsl``), loaded through
 :func:`bokehfit.gpu.shaders.load_shader` from the installed package, so a
 ``.wgsl`` file missing from the wheel fails here too.
+
+The ``reference_photo`` fixture finds the real photos of
+``reference_photos/manifest.json`` (in ``$BOKEHFIT_REFERENCE_DIR``); where one
+is missing, the test skips and says where to get them.
 """
 
 from __future__ import annotations
 
 import os
+import signal
 
 import numpy as np
 import pytest
@@ -51,14 +56,46 @@ _TYPES = {
 _pipelines: dict[str, object] = {}
 
 
+def pytest_configure(config):
+    """Give SIGINT back its default handler when the run started with it ignored.
+
+    A job started in the background by a non-interactive shell (``bash .ci/run &``)
+    inherits SIGINT ignored, and so would every process the tests start, which
+    then cannot be stopped with it (the viewer's server is). A handled signal,
+    unlike an ignored one, is back to its default in the processes started from here.
+    """
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
+@pytest.fixture(scope="session")
+def reference_photo():
+    """``reference_photo(name)`` -> path of a photo of reference_photos/manifest.json, checked by sha256.
+
+    The test skips where the photo is missing (or has another sha256), with a reason that
+    says where to get the photos; each photo is checked once per session.
+    """
+    from photo_factory import reference_photo as find
+
+    found = {}
+
+    def get(name: str):
+        if name not in found:
+            found[name] = find(name)
+        return found[name]
+
+    return get
+
+
 @pytest.fixture(scope="session")
 def gpu():
     """The package's GPU context; skip (fail under CI=true) where there is none."""
+    from bokehfit.cli import adapter_from_environment
     from bokehfit.errors import GPUUnavailableError
     from bokehfit.gpu import get_gpu
 
     try:
-        return get_gpu()
+        return get_gpu(adapter_from_environment())  # BOKEHFIT_ADAPTER/BACKEND, as the command line reads them
     except GPUUnavailableError as error:
         if os.environ.get("CI") == "true":
             pytest.fail(f"CI=true but no WebGPU adapter could be opened: {error}", pytrace=False)

@@ -18,7 +18,10 @@ from pathlib import Path
 
 import numpy as np
 
+#: The folder of the reference photos (else ``reference_photos/``, where copies are git-ignored).
 REFERENCE_ENV = "BOKEHFIT_REFERENCE_DIR"
+#: Set to 1 to fail, not skip, where a reference photo is missing (a CI that has them).
+REQUIRE_REFERENCE_ENV = "BOKEHFIT_REQUIRE_REFERENCE_PHOTOS"
 MANIFEST = Path(__file__).resolve().parents[1] / "reference_photos" / "manifest.json"
 
 # --------------------------------------------------------------------------------------
@@ -175,15 +178,19 @@ def _pad4(data: bytes) -> bytes:
     return data + b"\x00" * (-len(data) % 4)
 
 
-def make_icc_profile(description: str, gamma_u8f8: int = 563, colorants=ADOBE_COLORANTS) -> bytes:
+def make_icc_profile(
+    description: str, gamma_u8f8: int = 563, colorants=ADOBE_COLORANTS, curve: bytes | None = None
+) -> bytes:
     """A minimal valid RGB display profile: ``desc``, ``cprt``, ``wtpt``, colorants and a gamma curve.
 
-    ``gamma_u8f8`` is the curve's exponent in units of 1/256 (563 = Adobe RGB's 2.19921875).
+    ``gamma_u8f8`` is the curve's exponent in units of 1/256 (563 = Adobe RGB's 2.19921875);
+    ``curve`` replaces the whole tone-curve tag (see :func:`icc_para_curve`, :func:`icc_table_curve`).
     """
     ascii_text = description.encode("ascii") + b"\x00"
     desc = b"desc\x00\x00\x00\x00" + struct.pack(">I", len(ascii_text)) + ascii_text
     desc += struct.pack(">II", 0, 0) + struct.pack(">HB", 0, 0) + b"\x00" * 67  # empty Unicode and ScriptCode parts
-    curve = b"curv\x00\x00\x00\x00" + struct.pack(">IH", 1, gamma_u8f8)
+    if curve is None:
+        curve = b"curv\x00\x00\x00\x00" + struct.pack(">IH", 1, gamma_u8f8)
     tags = [
         (b"desc", desc),
         (b"cprt", b"text\x00\x00\x00\x00No copyright, use freely\x00"),
@@ -208,6 +215,17 @@ def make_icc_profile(description: str, gamma_u8f8: int = 563, colorants=ADOBE_CO
     header += _s15f16(*D50) + b"none" + b"\x00" * 16 + b"\x00" * 28  # illuminant, creator, id, reserved
     assert len(header) == 128
     return header + table + body
+
+
+def icc_para_curve(function: int, *params: float) -> bytes:
+    """An ICC ``para`` tag (parametricCurveType): function type 0–4 and its s15Fixed16 parameters."""
+    return b"para\x00\x00\x00\x00" + struct.pack(">HH", function, 0) + _s15f16(*params)
+
+
+def icc_table_curve(values) -> bytes:
+    """An ICC ``curv`` tag sampled at ``len(values)`` points (values in [0, 1])."""
+    codes = np.round(np.clip(np.asarray(values, dtype=np.float64), 0.0, 1.0) * 65535).astype(">u2")
+    return b"curv\x00\x00\x00\x00" + struct.pack(">I", codes.size) + codes.tobytes()
 
 
 # --------------------------------------------------------------------------------------
@@ -385,28 +403,53 @@ def file_state(path) -> tuple[str, int]:
     return hashlib.sha256(path.read_bytes()).hexdigest(), path.stat().st_mtime_ns
 
 
-def reference_photo(name: str) -> Path:
-    """A reference photo from ``$BOKEHFIT_REFERENCE_DIR`` (or ``reference_photos/``), checked by sha256.
+def reference_dir() -> Path:
+    """The folder that should hold the reference photos: ``$BOKEHFIT_REFERENCE_DIR``, else ``reference_photos/``."""
+    folder = os.environ.get(REFERENCE_ENV)
+    return Path(folder) if folder else MANIFEST.parent
 
-    Skips when the variable is unset, except under ``CI=true``, where it fails: CI must not
-    pass by skipping the real photos.
+
+def find_reference_photo(name: str) -> tuple[Path | None, str]:
+    """``(path, "")`` for a photo of the manifest present with its sha256, else ``(None, why not)``.
+
+    ``why not`` is one line that says where to get the photos. A name that is not in the
+    manifest is a mistake in the test, not a missing photo: it raises ``KeyError``.
+    """
+    expected = manifest_entry(name)["sha256"]
+    folder = reference_dir()
+    if os.environ.get(REFERENCE_ENV):
+        where = f"${REFERENCE_ENV} = {folder}"
+    else:
+        where = f"{folder} ({REFERENCE_ENV} is not set)"
+    fetch = (
+        "the reference photos are not in the repository: get them from the sources in "
+        f"reference_photos/manifest.json and point {REFERENCE_ENV} at their folder"
+    )
+    path = folder / name
+    if not folder.is_dir():
+        return None, f"no folder {where}; {fetch}"
+    if not path.is_file():
+        return None, f"{name} is not in {where}; {fetch}"
+    digest = hashlib.sha256(path.read_bytes()).hexdigest()
+    if digest != expected:
+        return None, f"{path} has sha256 {digest}, not the manifest's {expected}; {fetch}"
+    return path, ""
+
+
+def reference_photo(name: str) -> Path:
+    """A reference photo of the manifest, checked by sha256; the test skips where it is missing.
+
+    The photos are not in the repository, so a missing folder, a missing photo or one with
+    another sha256 skips the test with a reason that says where to get them; with
+    ``BOKEHFIT_REQUIRE_REFERENCE_PHOTOS=1`` (a CI that has them) it fails instead.
     """
     import pytest
 
-    folder = os.environ.get(REFERENCE_ENV)
-    if not folder and (MANIFEST.parent / name).is_file():  # copies kept in reference_photos/ (git-ignored)
-        folder = str(MANIFEST.parent)
-    if not folder:
-        if os.environ.get("CI") == "true":
-            pytest.fail(f"CI=true but {REFERENCE_ENV} is not set; point it at the reference photos", pytrace=False)
-        pytest.skip(f"{REFERENCE_ENV} is not set: the reference photos are not in the repository")
-    path = Path(folder) / name
-    if not path.is_file():
-        pytest.fail(f"{path} is missing; {REFERENCE_ENV} must hold the photos of {MANIFEST}", pytrace=False)
-    expected = {entry["file"]: entry for entry in json.loads(MANIFEST.read_text())["photos"]}[name]
-    digest = hashlib.sha256(path.read_bytes()).hexdigest()
-    if digest != expected["sha256"]:
-        pytest.fail(f"{path} has sha256 {digest}, the manifest says {expected['sha256']}", pytrace=False)
+    path, why = find_reference_photo(name)
+    if path is None:
+        if os.environ.get(REQUIRE_REFERENCE_ENV) == "1":
+            pytest.fail(f"{REQUIRE_REFERENCE_ENV}=1 but {why}", pytrace=False)
+        pytest.skip(why)
     return path
 
 

@@ -119,14 +119,16 @@ def test_exit_0_and_summary_names_hexagon(default):
     out = default["done"].stdout
     aperture_line = next(line for line in out.splitlines() if line.startswith("aperture:"))
     assert "hexagon" in aperture_line
-    assert "f-stop: f/" in out
-    assert "wrote out.json" in out and "wrote report.html" in out
+    assert "f-stop: at most f/" in out  # no --light-distance-m: the value for lights at infinity is a bound
+    assert "wrote out.json" in out and "wrote out.html" in out
+    assert out.splitlines()[0].startswith("Sure: hexagon"), "the verdict comes first"
 
 
 def test_json_follows_design_section_7(document):
     assert {"schema_version", "bokehfit_version", "command_line", "input", "aperture", "discs", "metrics",
-            "timing_s", "device"} <= set(document)
-    assert document["schema_version"] == 1
+            "timing_s", "device", "status", "reason"} <= set(document)
+    assert document["schema_version"] == 2
+    assert document["status"] == "fitted" and document["reason"] is None
     assert document["bokehfit_version"] == bokehfit.__version__
     assert document["command_line"].startswith("bokehfit compare ") and "--json out.json" in document["command_line"]
 
@@ -217,7 +219,7 @@ def test_circumscribed_convention_divides_by_r_sqrt_pi(runs, document):
 def test_no_html_writes_no_html(runs):
     result = runs("--lens-model", "pinhole", "--no-html")
     assert result["done"].returncode == 0, result["done"].stderr
-    assert "report.html" not in result["done"].stdout
+    assert ".html" not in result["done"].stdout
     assert not list(result["folder"].rglob("*.html"))
 
 
@@ -256,7 +258,7 @@ class _Page(HTMLParser):
 
 
 def test_report_html_parses_and_shows_images(default):
-    path = default["folder"] / "report.html"
+    path = default["folder"] / "out.html"
     assert path.is_file()
     page = _Page()
     page.feed(path.read_text(encoding="utf-8"))
@@ -283,7 +285,7 @@ def test_input_photo_unchanged_and_nothing_left_beside_it(runs, default):
 
 
 def test_only_the_requested_files_are_written(default):
-    assert written(default["folder"]) == {"out.json", "report.html"}
+    assert written(default["folder"]) == {"out.json", "out.html"}
     assert "Traceback" not in default["done"].stderr and "warning" not in default["done"].stderr
 
 
@@ -309,7 +311,10 @@ def test_flat_image_exits_1_on_one_line(tmp_path):
     done, tmpdir = bokehfit_cli("compare", path, "--json", "out.json", cwd=tmp_path)
     assert done.returncode == 1, done.stderr
     assert "no bokeh disc found" in one_line(done.stderr)
-    assert written(tmp_path) == {"flat.png"}
+    assert written(tmp_path) == {"flat.png", "out.json", "out.html"}
+    document = strict_json(tmp_path / "out.json")
+    assert document["schema_version"] == 2 and document["status"] == "no_discs"
+    assert document["reason"].startswith("no bokeh disc found") and document["aperture"]["shape"] is None
 
 
 def test_only_saturated_discs_exits_1_naming_why(tmp_path):

@@ -47,7 +47,7 @@ def test_table_json_and_overlay(photo, tmp_path):
     discs = data["discs"]
     assert len(discs) == len(TRUTH)
     for disc in discs:
-        assert {"center_xy", "diameter_px", "angle_deg", "iou", "hausdorff_rel", "saturated", "clipped", "used",
+        assert {"center_xy", "diameter_px", "angle_deg", "iou", "hausdorff_rel", "saturated", "clipped", "usable",
                 "outline_xy", "plateau"} <= set(disc)
         assert len(disc["outline_xy"]) >= 8
     for truth in TRUTH:

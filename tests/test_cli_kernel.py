@@ -45,10 +45,20 @@ def test_mc_prints_adapter(tmp_path, gpu):
     "args,needle",
     [
         (["--shape", "hexgon"], "--shape"),
-        (["--diameter-px", "nan"], "diameter_px"),
+        (["--diameter-px", "nan"], "--diameter-px"),
         (["--size", "0"], "size"),
         (["--shape", "ngon"], "blades"),
         (["--aspect", "2"], "aspect"),
+        (["--roundness", "1.5"], "argument --roundness: must be a finite number in [0, 1]"),
+        (["--roundness", "0.3", "--shape", "star"], "roundness applies only to n-gons"),
+        (["--squeeze", "-1"], "argument --squeeze: must be"),
+        (["--vignetting", "0.5,0"], "argument --vignetting: must be"),
+        (["--vignetting", "1.2"], "argument --vignetting: must be RADIUS,SHIFT"),
+        (["--vignetting", "1.2,0", "--field-position", "20,0"], "argument --field-position: must be"),
+        (["--field-position", "0.5,0.5"], "--field-position applies only with --vignetting"),
+        (["--rim", "1.01"], "argument --rim: must be a finite number in [-1, 1]"),
+        (["--chromatic", "0.1"], "argument --chromatic: must be RED,BLUE"),
+        (["--chromatic", "0.1,0.9"], "argument --chromatic: must be"),
     ],
 )
 def test_bad_input_one_line_exit_2(tmp_path, args, needle):
@@ -70,3 +80,48 @@ def test_clipped_kernel_warns_on_one_line(tmp_path):
     done = bokehfit("kernel", "--diameter-px", "100", "--size", "32", "--out", "k.npy", cwd=tmp_path)
     assert done.returncode == 0
     assert "warning: kernel clipped" in done.stderr and "Traceback" not in done.stderr
+
+
+def test_ngon_n_spelling_as_in_compare_shapes(tmp_path):
+    done = bokehfit("kernel", "--shape", "ngon(9)", "--diameter-px", "20", "--size", "32", "--out", "k.npy", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert "ngon(9)" in done.stdout
+    np.testing.assert_array_equal(np.load(tmp_path / "k.npy"), render_kernel("ngon", 0.0, 20.0, 32, blades=9))
+
+
+
+def test_feature_flags_match_the_api(tmp_path):
+    from bokehfit.apertures import Vignetting
+
+    common = ["kernel", "--diameter-px", "20", "--size", "32", "--out", "k.npy"]
+    cases = [
+        (["--shape", "ngon(9)", "--roundness", "0.5"], dict(shape="ngon", blades=9, roundness=0.5)),
+        (["--squeeze", "1.5", "--angle", "10"], dict(shape="hexagon", angle_deg=10.0, squeeze=1.5)),
+        (["--rim", "-0.4", "--side", "near"], dict(shape="hexagon", rim=-0.4, side="near")),
+        (["--vignetting", "1.1,0.9", "--field-position", "0.7,-0.2"],
+         dict(shape="hexagon", vignetting=Vignetting(1.1, 0.9), field_position=(0.7, -0.2))),
+    ]
+    for flags, params in cases:
+        done = bokehfit(*common, *flags, cwd=tmp_path)
+        assert done.returncode == 0, done.stderr
+        shape = params.pop("shape")
+        np.testing.assert_array_equal(np.load(tmp_path / "k.npy"), render_kernel(shape, diameter_px=20.0, size=32, **params))
+    assert "% of the light passes" in done.stdout
+
+
+def test_chromatic_writes_rgb_npy_png_exr(tmp_path):
+    from bokehfit.apertures import Chromatic
+
+    common = ["kernel", "--diameter-px", "20", "--size", "32", "--chromatic", "0.08,-0.06"]
+    for suffix in ("npy", "png", "exr"):
+        done = bokehfit(*common, "--out", f"k.{suffix}", cwd=tmp_path)
+        assert done.returncode == 0, done.stderr
+    expected = render_kernel("hexagon", diameter_px=20.0, size=32, chromatic=Chromatic(0.08, -0.06))
+    assert expected.shape == (32, 32, 3)
+    np.testing.assert_array_equal(np.load(tmp_path / "k.npy"), expected)
+    png = cv2.imread(str(tmp_path / "k.png"), cv2.IMREAD_UNCHANGED)[..., ::-1]  # OpenCV reads BGR
+    assert png.dtype == np.uint16 and png.shape == (32, 32, 3) and png.max() == 65535
+    np.testing.assert_allclose(png / 65535.0, expected / expected.max(), atol=1 / 65535)
+    with OpenEXR.File(str(tmp_path / "k.exr")) as exr:
+        rgb = exr.channels()["RGB"].pixels  # OpenEXR groups R, G, B into one (H, W, 3) channel
+        np.testing.assert_array_equal(rgb, expected)

@@ -29,7 +29,8 @@ def test_json_matches_the_api(tmp_path):
     assert JSON_KEYS <= set(data)
     assert data["schema_version"] == 1
     assert data["command_line"].startswith("bokehfit similarity hexagon circle")
-    assert data["a"] == {"shape": "hexagon", "angle_deg": 20.0, "blades": 6, "aspect": None, "symmetry_deg": 60.0}
+    assert data["a"] == {"shape": "hexagon", "angle_deg": 20.0, "blades": 6, "aspect": None, "symmetry_deg": 60.0,
+                         "roundness": 0.0, "squeeze": 1.0, "vignetting": None, "field_position": None}
     assert data["b"]["shape"] == "circle" and data["b"]["angle_deg"] is None
     expected = compare_outlines(aperture_outline(make_aperture("hexagon", 20.0)), aperture_outline(make_aperture("circle")))
     assert data["metrics"] == expected  # JSON floats round-trip exactly
@@ -81,3 +82,57 @@ def test_unknown_shape_exit_2_one_line(tmp_path):
 def test_bad_options_name_the_option(args, needle):
     with pytest.raises(InputError, match=f"^{needle}"):
         main(["similarity", *args])
+
+
+def test_ngon_n_spelling_as_in_compare_shapes(capsys):
+    """``ngon(9)`` names the same aperture as ``ngon --blades 9``, as in ``compare --shapes``."""
+    result = main(["similarity", "ngon(9)", "ngon", "--blades-b", "9"])
+    assert result["a"] == result["b"] and result["a"]["blades"] == 9
+    assert result["metrics"]["iou"] == pytest.approx(1.0, abs=1e-6)
+    assert result["angle_error_deg"] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_aperture_features_per_side(capsys):
+    """--roundness-a, --squeeze-b, --vignetting-a with --field-position-a change the compared outline."""
+    result = main(["similarity", "ngon(9)", "ngon(9)", "--roundness-a", "0.5", "--squeeze-b", "1.4"])
+    a = make_aperture("ngon", 0.0, blades=9, roundness=0.5)
+    b = make_aperture("ngon", 0.0, blades=9, squeeze=1.4)
+    assert result["a"]["roundness"] == 0.5 and result["b"]["squeeze"] == 1.4
+    assert result["metrics"] == compare_outlines(aperture_outline(a), aperture_outline(b))
+    assert result["metrics"]["iou"] < 0.95
+    # Rounded blades at roundness 1 are the circle.
+    assert main(["similarity", "ngon(9)", "circle", "--roundness-a", "1"])["metrics"]["iou"] == pytest.approx(1.0, abs=1e-4)
+    clipped = main(["similarity", "pentagon", "pentagon", "--vignetting-a", "1.2,1.5", "--field-position-a", "0.7,0.3"])
+    assert clipped["a"]["vignetting"] == {"radius": 1.2, "shift": 1.5} and clipped["a"]["field_position"] == [0.7, 0.3]
+    assert clipped["metrics"]["iou"] < 0.9
+    # At the centre a barrel of 1.2·R0 clears the pentagon's corners (circumradius 0.6485 < 0.677): nothing is cut.
+    centred = main(["similarity", "pentagon", "pentagon", "--vignetting-a", "1.2,1.5"])
+    assert centred["metrics"]["iou"] == pytest.approx(1.0, abs=1e-4)
+
+
+@pytest.mark.parametrize(
+    "args,needle",
+    [
+        (["star", "circle", "--roundness-a", "0.3"], "--roundness-a"),
+        (["hexagon", "circle", "--field-position-b", "0.1,0.1"], "--field-position-b"),
+    ],
+)
+def test_feature_options_name_the_option(args, needle):
+    with pytest.raises(InputError, match=f"^{needle}"):
+        main(["similarity", *args])
+
+
+@pytest.mark.parametrize(
+    "args,needle",
+    [
+        (["--roundness-a", "2"], "argument --roundness-a: must be"),
+        (["--squeeze-b", "0"], "argument --squeeze-b: must be"),
+        (["--vignetting-a", "0.5,0"], "argument --vignetting-a: must be"),
+        (["--vignetting-b", "1.2"], "argument --vignetting-b: must be RADIUS,SHIFT"),
+        (["--field-position-a", "x,1"], "argument --field-position-a: must be"),
+    ],
+)
+def test_bad_feature_values_one_line_exit_2(tmp_path, args, needle):
+    done = bokehfit("similarity", "hexagon", "hexagon", *args, cwd=tmp_path)
+    assert done.returncode == 2 and needle in done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1, done.stderr

@@ -35,7 +35,7 @@ JPEG_CENTRE_TOL_PX = 0.6
 SLIT_MIN_WIDTH_PX = 3.0
 
 DIAMETERS = (6, 9, 14, 22, 35, 56, 90, 140, 200)
-SHAPE_CASES = [dict(shape="ngon", blades=9) if s == "ngon" else dict(shape=s) for s in SHAPES]
+SHAPE_CASES = [dict(shape="ngon", blades=9) if s == "ngon" else dict(shape=s) for s, spec in SHAPES.items() if not spec.tabulated]  # a mask is not fitted
 
 
 def layout(diameters, shapes, *, seed=0, spacing_factor=1.5, width=None):

@@ -26,7 +26,7 @@ import pytest
 from bokehfit.apertures import make_aperture
 from bokehfit.discs import find_discs
 from bokehfit.errors import InputError
-from bokehfit.fit import fit_aperture
+from bokehfit.fit import FitFailedError, fit_aperture
 from bokehfit.io import load_photo
 from bokehfit.metrics import angle_error
 from bokehfit.synthetic import SyntheticDisc, encode_srgb8, render_discs
@@ -258,7 +258,11 @@ def test_no_clean_disc_gives_falsy_fit_naming_why(discs, size, reasons):
     assert not any(d.usable for d in search.discs)
     fit = fit_aperture(luminance, search.discs)
     assert not fit
-    assert fit.aperture is None and fit.candidates == [] and fit.disc_fits == []
+    assert fit.candidates == [] and fit.disc_fits == []
+    assert fit.status == "no_discs"
+    for name in ("aperture", "family", "diameter_px"):
+        with pytest.raises(FitFailedError, match="no disc is clean enough"):
+            getattr(fit, name)
     assert "no disc is clean enough" in fit.message
     for reason in reasons:
         assert reason in fit.message, fit.message

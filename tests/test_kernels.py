@@ -13,7 +13,7 @@ from bokehfit.apertures import SHAPES, make_aperture
 from bokehfit.kernels import METHODS, KernelClippedWarning, compute_kernel, render_kernel
 
 #: Every shape; the slit at aspect 0.6 so that it fits the small frames used here.
-SHAPE_PARAMS = [(s, {"ngon": {"blades": 9}, "slit": {"aspect": 0.6}}.get(s, {})) for s in SHAPES]
+SHAPE_PARAMS = [(s, {"ngon": {"blades": 9}, "slit": {"aspect": 0.6}}.get(s, {})) for s, spec in SHAPES.items() if not spec.tabulated]  # mask: test_mask.py
 #: Brute-force raster: SUPERSAMPLE² points per pixel; a pixel's coverage is then
 #: exact to within the share of points an edge can flip, ≤ about 2/SUPERSAMPLE.
 SUPERSAMPLE = 32
@@ -204,3 +204,61 @@ def test_bad_parameters_raise_value_error_naming_them(kwargs, parameter):
     args.update(kwargs)
     with pytest.raises(ValueError, match=parameter):
         render_kernel(args.pop("shape"), args.pop("angle_deg"), args.pop("diameter_px"), args.pop("size"), **args)
+
+
+# --- limits: the adapter's, the sample counts', the tolerance's ---------------------------------
+
+
+def test_mc_counted_in_bands_equals_one_pass(gpu):
+    """A frame larger than one storage binding is counted band by band: the same samples, the same kernel."""
+    from bokehfit.kernels.mc import mc_counts
+
+    aperture = make_aperture("star", 10.0)
+    whole, drawn = mc_counts(aperture, 18.0, 40, 20_000, 7, "stratified")
+    banded, drawn_banded = mc_counts(aperture, 18.0, 40, 20_000, 7, "stratified", max_band_bytes=4 * 40 * 7)  # 6 bands
+    assert drawn == drawn_banded and whole.sum() > 0.9 * drawn
+    np.testing.assert_array_equal(banded, whole)
+
+
+def test_mc_band_rows_follow_the_adapter_limits():
+    """8192² u32 is 256 MiB: on an adapter with 128 MiB bindings, two bands; one row too wide is refused."""
+    from bokehfit.errors import InputError
+    from bokehfit.kernels.mc import band_rows
+
+    limits = {"max-storage-buffer-binding-size": 2**27, "max-buffer-size": 2**31}
+    assert band_rows(limits, 8192) == 4096
+    assert band_rows(limits, 1024) == 1024
+    with pytest.raises(InputError, match=r"size must be at most 1024 for method 'mc'"):
+        band_rows({"max-storage-buffer-binding-size": 4096, "max-buffer-size": 2**31}, 2000)
+
+
+def test_raster_sub_pixel_disc_at_the_default_sample_count(gpu):
+    """2²² samples over a 0.5-px disc ask for 2·10⁷ super-samples a pixel: capped, not a crash."""
+    kernel = compute_kernel("hexagon", 0.0, 0.5, 8, method="raster")
+    assert kernel.image.sum() == pytest.approx(1.0, abs=1e-6)
+    np.testing.assert_allclose(kernel.image[3:5, 3:5], 0.25, atol=0.01)
+    assert 0 < kernel.samples <= 2**22
+
+
+def test_samples_beyond_the_largest_stratified_grid_are_refused_before_the_gpu():
+    from bokehfit.errors import InputError
+
+    with pytest.raises(InputError, match=r"^samples must be an integer in \[1, 2147395600\] \(got 2147483648\)"):
+        render_kernel("hexagon", 0.0, 20.0, 32, method="mc", samples=2**31)
+
+
+@pytest.mark.parametrize("method", [None, "exact"])
+def test_unreachable_tolerance_names_the_smallest(method):
+    from bokehfit.errors import InputError
+
+    with pytest.raises(InputError, match=r"^tolerance must be at least 5.96e-08, the float32 rounding"):
+        render_kernel("hexagon", 0.0, 64.0, 128, method=method, tolerance=1e-300)
+
+
+def test_tolerance_beyond_a_sampling_method_names_its_smallest():
+    from bokehfit.errors import InputError
+    from bokehfit.kernels.accuracy import predicted_l1
+
+    smallest = predicted_l1("mc", "stratified", 64.0, 46340**2)
+    with pytest.raises(InputError, match=rf"^tolerance must be at least {smallest:.3g} for method 'mc' on a 64-px disc"):
+        render_kernel("hexagon", 0.0, 64.0, 128, method="mc", tolerance=1e-6)

@@ -19,6 +19,7 @@ from bokehfit.apertures import CIRCLE_RADIUS, make_aperture
 from bokehfit.errors import InputError
 from bokehfit.metrics import (
     METRICS,
+    MetricOptions,
     angle_error,
     aperture_outline,
     best_rotation_deg,
@@ -348,6 +349,39 @@ def test_registry_and_dispatcher():
     assert everything["hausdorff_rel"] == hausdorff_rel(a, b)
 
 
+def test_iou_does_not_depend_on_an_earlier_narrow_alignment():
+    # The sequence of the bug report: a narrow search of the same pair must not
+    # change what a later full search returns.
+    a, b = outline("triangle", 0.0), outline("triangle", 40.0)
+    before = iou(a, b)
+    narrow = compare_outlines(a, b, rotation_within_deg=1)
+    after = iou(a, b)
+    assert before == pytest.approx(1.0, abs=IOU_SELF_ATOL)
+    assert narrow["iou"] < 0.6  # 40° off (= 80° of 120°) cannot be undone within ±1°
+    assert after == before
+
+
+def test_compare_outlines_same_answer_whatever_came_before():
+    a, b = outline("hexagon", 0.0), outline("hexagon", 25.0)
+    full = compare_outlines(a, b)
+    narrow = compare_outlines(a, b, options=MetricOptions(rotation_within_deg=2.0))
+    assert compare_outlines(a, b) == full
+    assert compare_outlines(a, b, options=MetricOptions(rotation_within_deg=2.0)) == narrow
+    assert full["iou"] == pytest.approx(1.0, abs=IOU_SELF_ATOL) and narrow["iou"] < full["iou"] - 0.05
+    assert hausdorff_rel(a, b) == full["hausdorff_rel"]
+
+
+def test_metric_options_reach_every_metric():
+    a, b = outline("pentagon", 0.0), outline("square", 10.0)
+    options = MetricOptions(rotation_within_deg=1.5, harmonics=8)
+    values = compare_outlines(a, b, options=options)
+    assert values["iou"] == iou(a, b, rotation_within_deg=1.5)
+    assert values["hausdorff_rel"] == hausdorff_rel(a, b, rotation_within_deg=1.5)
+    assert values["efd_distance"] == efd_distance(a, b, harmonics=8)
+    unaligned = compare_outlines(a, b, ["iou"], options=MetricOptions(align=False))
+    assert unaligned["iou"] == iou(a, b, align=False) == pytest.approx(shapely_iou(a, b), abs=IOU_SHAPELY_ATOL)
+
+
 GOOD = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
 
 
@@ -363,6 +397,13 @@ GOOD = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
         (lambda: best_rotation_deg("square", GOOD), "a"),
         (lambda: compare_outlines(GOOD, GOOD, ["iou", "area"]), "metrics"),
         (lambda: compare_outlines(GOOD, [[1, 1], [1, 1], [1, 1], [1, 1]]), "b"),
+        (lambda: compare_outlines(GOOD, GOOD, rotation_within_deg=0.0), "rotation_within_deg"),
+        (lambda: compare_outlines(GOOD, GOOD, options={"align": False}), "options"),
+        (lambda: compare_outlines(GOOD, GOOD, options=MetricOptions(), rotation_within_deg=1.0), "rotation_within_deg"),
+        (lambda: MetricOptions(rotation_within_deg=float("nan")), "rotation_within_deg"),
+        (lambda: MetricOptions(harmonics=0), "harmonics"),
+        (lambda: MetricOptions(align="yes"), "align"),
+        (lambda: iou(GOOD, GOOD, rotation_within_deg=-1.0), "rotation_within_deg"),
         (lambda: normalise([[0, 0], [0, 0], [1, 1]]), "outline"),
         (lambda: angle_error(float("nan"), 1.0, 60.0), "angle_a_deg"),
         (lambda: angle_error(1.0, 2.0, 0.0), "symmetry_deg"),

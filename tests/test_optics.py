@@ -19,7 +19,7 @@ import pytest
 
 from bokehfit.apertures import make_aperture
 from bokehfit.errors import InputError
-from bokehfit.optics import circumscribed_fstop, coc_mm, fstop_from_coc, pixel_pitch_mm
+from bokehfit.optics import circumscribed_fstop, coc_mm, fstop_from_coc, light_distance_from_coc, pixel_pitch_mm
 
 #: Circumradius of each unit-area shape at scale 1 (design.md §3 table).
 CIRCUMRADIUS = {
@@ -111,6 +111,45 @@ def test_fstop_round_trip(lens, geometry):
         c = coc_mm(n, focal, focus, light, lens_model=lens)
         assert c > 0
         assert fstop_from_coc(c, focal, focus, light, lens_model=lens) == pytest.approx(n, rel=1e-12)
+
+
+@pytest.mark.parametrize("lens", ["thin", "pinhole"])
+@pytest.mark.parametrize(
+    "geometry", [g for g in GEOMETRIES if math.isfinite(g[2])], ids=lambda g: f"f{g[0]:g}-df{g[1]:g}-d{g[2]:g}"
+)
+def test_light_distance_round_trip(lens, geometry):
+    """The light distance that makes a disc at EXIF's f-stop: the inverse of coc_mm in d, on either side.
+
+    (A light at infinity has no finite round trip: the next test covers it as the bound.)
+    """
+    focal, focus, light = geometry
+    side = "far" if light > focus else "near"
+    for n in FSTOPS:
+        c = coc_mm(n, focal, focus, light, lens_model=lens)
+        assert light_distance_from_coc(c, n, focal, focus, side, lens_model=lens) == pytest.approx(light, rel=1e-9)
+
+
+def test_no_light_behind_the_focus_plane_makes_a_disc_larger_than_infinity_does():
+    """f² / (N (d_f − f)) is the far side's largest disc: c = (f/N)·f·(1 − d_f/d)/(d_f − f) < it for every d."""
+    at_infinity = 85.0**2 / (1.8 * (7270.0 - 85.0))  # 0.5586 mm
+    assert coc_mm(1.8, 85.0, 7.27, math.inf) == pytest.approx(at_infinity, rel=1e-12)
+    assert light_distance_from_coc(at_infinity * 1.001, 1.8, 85.0, 7.27, "far") is None
+    assert light_distance_from_coc(at_infinity * 0.5, 1.8, 85.0, 7.27, "far") == pytest.approx(2 * 7.27, rel=1e-12)
+    assert light_distance_from_coc(at_infinity, 1.8, 85.0, 7.27, "near") == pytest.approx(7.27 / 2, rel=1e-12)
+
+
+@pytest.mark.parametrize("light_m", [7.5, 10.0, 30.0, 1e3, 1e6])
+def test_lights_at_infinity_give_an_upper_bound_on_the_fstop(light_m):
+    """A disc read for lights at infinity gives the largest f-stop any light behind the focus plane allows."""
+    c = 0.3
+    bound = fstop_from_coc(c, 85.0, 7.27, math.inf)
+    assert fstop_from_coc(c, 85.0, 7.27, light_m) < bound
+    assert fstop_from_coc(c, 85.0, 7.27, light_m) == pytest.approx(bound * (1 - 7.27 / light_m), rel=1e-12)
+
+
+def test_light_distance_refuses_a_bad_side():
+    with pytest.raises(InputError, match="side must be one of far, near"):
+        light_distance_from_coc(0.1, 2.0, 50.0, 2.0, "behind")
 
 
 def test_same_disc_gives_a_smaller_fstop_under_the_pinhole_model():
@@ -227,3 +266,20 @@ def test_inverse_in_float32_agrees_with_float64():
     for (focal, focus, light), n in itertools.product(GEOMETRIES[:4], FSTOPS):
         c = np.float32(coc_mm(n, focal, focus, light))
         assert fstop_from_coc(c, focal, focus, light) == pytest.approx(n, rel=FLOAT32_RTOL)
+
+
+@pytest.mark.parametrize(
+    "call,needle",
+    [
+        (lambda: coc_mm(2.0, 1e-300, 2.0, 10.0), r"^focal_length_mm must be a finite number in \[1, 10000\] mm"),
+        (lambda: coc_mm(2.0, 50.0, 2.0, -3.0), r"^light_distance_m must be a number in \(0, .*\] m or inf"),
+        (lambda: coc_mm(1e-300, 50.0, 2.0, 10.0), r"^fstop must be a finite number in \[0.1, 10000\]"),
+        (lambda: fstop_from_coc(1e308, 50.0, 2.0, 10.0), r"^coc must be a finite number in \(0, 1000\] mm"),
+        (lambda: pixel_pitch_mm(1e308, 6000, 4000), r"^sensor_width_mm must be a finite number in \[1, 300\] mm"),
+    ],
+    ids=["focal-1e-300", "light-minus-3", "fstop-1e-300", "coc-1e308", "sensor-1e308"],
+)
+def test_absurd_geometry_is_refused_with_the_physical_range(call, needle):
+    """Issue: focal length 1e-300 mm or a 1e308 mm sensor gave nonsense with no error."""
+    with pytest.raises(InputError, match=needle):
+        call()

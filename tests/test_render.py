@@ -312,6 +312,27 @@ def test_cli_writes_png_exr_and_json(tmp_path, gpu):
     assert not list(tmp_path.glob(".c.*")), "temporary files left behind"
 
 
+def test_cli_real_lens_features(tmp_path, gpu):
+    """The §3b flags reach the renderer: the image is the Python API's, and the JSON names them."""
+    features = ["--roundness", "0.4", "--squeeze", "1.3", "--vignetting", "1.1,2", "--rim", "0.5", "--chromatic", "0.03,-0.02"]
+    common = ["render", "--scene", "points", "--shape", "ngon", "--blades", "9", "--fstop", "1.4", "--spp", "4", "--size", "48x32"]
+    done = bokehfit(*common, *features, "--out", "f.exr", "--json", "f.json", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    lens = json.loads((tmp_path / "f.json").read_text())["lens"]
+    assert (lens["roundness"], lens["squeeze"], lens["rim"]) == (0.4, 1.3, 0.5)
+    assert lens["vignetting"] == {"radius": 1.1, "shift": 2.0} and lens["chromatic"] == {"red": 0.03, "blue": -0.02}
+    with OpenEXR.File(str(tmp_path / "f.exr")) as exr:
+        channels = exr.channels()
+        rgb = channels["RGB"].pixels if "RGB" in channels else np.stack([channels[c].pixels for c in "RGB"], axis=-1)
+    expected = render(
+        "points", shape="ngon", blades=9, fstop=1.4, spp=4, width=48, height=32, roundness=0.4, squeeze=1.3,
+        vignetting=dict(radius=1.1, shift=2.0), rim=0.5, chromatic=dict(red=0.03, blue=-0.02),
+    ).image
+    np.testing.assert_array_equal(rgb, expected)
+    plain = render("points", shape="ngon", blades=9, fstop=1.4, spp=4, width=48, height=32).image
+    assert not np.array_equal(rgb, plain)
+
+
 @pytest.mark.parametrize(
     "args,needle",
     [
@@ -322,10 +343,18 @@ def test_cli_writes_png_exr_and_json(tmp_path, gpu):
         (["--size", "0x0"], "size"),
         (["--size", "12"], "size"),
         (["--spp", "0"], "spp"),
-        (["--focus-distance", "0"], "focus_distance"),
-        (["--focus-distance", "-1"], "focus_distance"),
+        (["--focus-distance", "0"], "--focus-distance"),
+        (["--focus-distance", "-1"], "--focus-distance"),
         (["--scene", "kitchen"], "scene"),
         (["--scene", "cornell", "--light-depths", "1,2"], "light depths"),
+        (["--roundness", "1.5", "--shape", "hexagon"], "--roundness: must be a finite number in [0, 1]"),
+        (["--roundness", "0.5"], "roundness applies only to n-gons"),
+        (["--squeeze", "0"], "--squeeze: must be"),
+        (["--rim", "-2"], "--rim: must be"),
+        (["--vignetting", "1.2"], "--vignetting: must be RADIUS,SHIFT"),
+        (["--vignetting", "0.5,1"], "--vignetting: must be a finite number in [1, 1000]"),
+        (["--chromatic", "0.1,x"], "--chromatic: must be"),
+        (["--chromatic", "0.9,0"], "--chromatic: must be a finite number in [-0.5, 0.5]"),
     ],
 )
 def test_cli_bad_input_one_line_exit_2(tmp_path, args, needle):
@@ -333,4 +362,34 @@ def test_cli_bad_input_one_line_exit_2(tmp_path, args, needle):
     assert done.returncode == 2, done.stderr
     assert needle in done.stderr
     assert len(done.stderr.strip().splitlines()) == 1, done.stderr
+    assert not (tmp_path / "x.png").exists()
+
+
+# --- long renders: a cap, an estimate before starting, a bound on the time -----------------------
+
+
+@pytest.mark.parametrize("scene", ["cornell", "points"])
+def test_estimate_is_near_the_time_the_render_takes(gpu, scene):
+    from bokehfit.scene import build_scene, estimate_render_s, make_lens, make_settings, render_scene
+
+    built = build_scene(scene)
+    lens = make_lens("hexagon", 0.0, fstop=2.0, focus_distance_m=built.default_focus_m)
+    settings = make_settings(96, 64, 24, 0)
+    estimate, rate = estimate_render_s(built, lens, settings)
+    actual = render_scene(built, lens, settings)
+    assert rate > 0
+    # Timings on a shared CPU adapter are noisy: the estimate only has to be the right size.
+    assert actual.time_s / 4 < estimate < actual.time_s * 4 + 0.05, (estimate, actual.time_s)
+
+
+def test_render_beyond_max_time_is_refused_before_it_starts(gpu):
+    with pytest.raises(InputError, match=r"^max_time_s: the render would take about .* s, more than 0.5 s"):
+        render("cornell", spp=65536, width=512, height=512, max_time_s=0.5)
+
+
+def test_cli_long_render_is_refused_with_its_estimate(tmp_path, gpu):
+    done = bokehfit("render", "--spp", "65536", "--max-time", "1", "--out", "x.png", cwd=tmp_path)
+    assert done.returncode == 2, done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1, done.stderr
+    assert "the render would take about" in done.stderr and "more than --max-time 1 s" in done.stderr
     assert not (tmp_path / "x.png").exists()

@@ -107,7 +107,7 @@ def test_uniform_layout_is_render_params(server):
     assert layout["size_bytes"] == RENDER_PARAMS.dtype.itemsize
     assert layout["wgsl"] == RENDER_PARAMS.wgsl()
     assert config["shader"]["entry_point"] == "main" and config["shader"]["workgroup_size"] == [8, 8, 1]
-    assert [s["name"] for s in config["shapes"]] == list(SHAPES)
+    assert [s["name"] for s in config["shapes"]] == [name for name, spec in SHAPES.items() if not spec.tabulated]  # no mask yet
 
 
 def test_shader_is_the_package_wgsl_with_includes_resolved(server):
@@ -116,8 +116,13 @@ def test_shader_is_the_package_wgsl_with_includes_resolved(server):
     source = body.decode("utf-8")
     assert "#include" not in source
     for name in ("rng.wgsl", "apertures.wgsl", "camera.wgsl", "scene.wgsl"):
-        body_lines = [line for line in shader_source(name).splitlines() if "#include" not in line]
-        assert "\n".join(body_lines) in source, f"{name} is not in the served shader verbatim"
+        # Each run of lines between two includes stands in the served shader verbatim, in order.
+        chunks = re.split(r"^// #include .*$", shader_source(name), flags=re.M)
+        position = 0
+        for chunk in (c.strip("\n") for c in chunks):
+            found = source.find(chunk, position)
+            assert found >= 0, f"{name} is not in the served shader verbatim"
+            position = found + len(chunk)
     assert RENDER_PARAMS.wgsl() in source
     assert scene_wgsl(cornell_box()) in source
     assert source.count("fn camera_ray(") == 1 and source.count("struct RenderParams") == 1
@@ -143,6 +148,61 @@ def test_params_are_the_lens_values(server):
     assert values["sample_index"] == 0
     assert answer["describe"] == lens.describe()
     assert answer["symmetry_deg"] == pytest.approx(360 / 7)
+
+
+def test_config_has_the_real_lens_feature_sliders(server):
+    config = json.loads(get(server, "/config.json")[2])
+    ranges, defaults = config["ranges"], config["defaults"]
+    for name in ("roundness", "squeeze", "rim", "vignetting_radius", "vignetting_shift", "chromatic_red", "chromatic_blue"):
+        low, high = ranges[name]
+        assert low < defaults[name] < high or low <= defaults[name] <= high, name
+    # The model's neutral values: straight blades, no squeeze, a flat profile; no barrel, no colour.
+    assert (defaults["roundness"], defaults["squeeze"], defaults["rim"]) == (0.0, 1.0, 0.0)
+    assert defaults["vignetting"] is False and (defaults["chromatic_red"], defaults["chromatic_blue"]) == (0.0, 0.0)
+    assert ranges["roundness"] == [0.0, 1.0] and ranges["rim"] == [-1.0, 1.0]
+    rounds = {s["name"]: s["rounds"] for s in config["shapes"]}
+    assert rounds["ngon"] and rounds["hexagon"] and not rounds["circle"] and not rounds["star"]
+    page = get(server, "/")[2].decode()
+    for element in ("roundness", "squeeze", "rim", "vignetting", "vignetting-radius", "vignetting-shift", "chromatic-red", "chromatic-blue"):
+        assert f'id="{element}"' in page, element
+
+
+def test_params_carry_the_real_lens_features(server):
+    query = (
+        "shape=ngon&blades=9&angle=10&fstop=2&focus=0.9&width=96&height=64&roundness=0.4&squeeze=1.3&rim=0.5"
+        "&vignetting_radius=1.2&vignetting_shift=0.8&chromatic_red=0.03&chromatic_blue=-0.02"
+    )
+    status, _, body = get(server, f"/params.json?{query}")
+    assert status == 200
+    answer = json.loads(body)
+    values = answer["values"]
+    lens = make_lens(
+        "ngon", 10.0, fstop=2.0, focus_distance_m=0.9, blades=9, roundness=0.4, squeeze=1.3, rim=0.5,
+        vignetting=dict(radius=1.2, shift=0.8), chromatic=dict(red=0.03, blue=-0.02),
+    )
+    for name, value in lens.aperture.shader_params().items():
+        assert values[name] == pytest.approx(f32(value)), name
+    assert answer["lens"]["vignetting"] == {"radius": 1.2, "shift": 0.8}
+    assert answer["lens"]["chromatic"] == {"red": 0.03, "blue": -0.02}
+    assert answer["describe"] == lens.describe()
+    # Roundness belongs to n-gons: the page's value is left out for a circle, not refused.
+    values = json.loads(get(server, "/params.json?shape=circle&roundness=0.5")[2])["values"]
+    assert values["roundness"] == 0.0
+
+
+@pytest.mark.parametrize(
+    "query,needle",
+    [
+        ("vignetting_radius=1.5", "vignetting_shift must be given"),
+        ("vignetting_radius=0.5&vignetting_shift=1", "vignetting.radius"),
+        ("chromatic_red=0.9&chromatic_blue=0", "chromatic.red"),
+        ("squeeze=0", "squeeze"),
+        ("rim=2", "rim"),
+    ],
+)
+def test_bad_feature_params_answer_400_naming_the_parameter(server, query, needle):
+    status, _, body = get(server, f"/params.json?{query}")
+    assert status == 400 and needle in json.loads(body)["error"]
 
 
 @pytest.mark.parametrize(
@@ -195,9 +255,23 @@ def test_settings_from_compare():
     assert any("modulo" in note for note in m["notes"])
 
 
+def test_settings_from_compare_reads_the_real_lens_features():
+    features = dict(roundness=0.3, squeeze=1.2, rim=-0.4, vignetting={"radius": 1.4, "shift": 0.9}, chromatic={"red": 0.02, "blue": -0.01})
+    m = settings_from_compare({**compare_document(shape="ngon", blades=9, **features), "schema_version": 2})
+    assert {key: m[key] for key in features} == features
+    # Null (a feature not fitted) and schema 1 (no such keys) give the defaults.
+    nulls = dict(roundness=None, squeeze=None, rim=None, vignetting=None, chromatic=None)
+    for document in (compare_document(**nulls), compare_document()):
+        m = settings_from_compare(document)
+        assert (m["roundness"], m["squeeze"], m["rim"], m["vignetting"], m["chromatic"]) == (0.0, 1.0, 0.0, None, None)
+
+
 @pytest.mark.parametrize(
     "document,needle",
     [
+        ({"aperture": {"shape": "ngon", "blades": 9, "vignetting": {"radius": 1.2}}}, "aperture.vignetting must be an object"),
+        ({"aperture": {"shape": "ngon", "blades": 9, "roundness": "round"}}, "aperture.roundness"),
+        ({"aperture": {"shape": "circle", "roundness": 0.5}}, "roundness applies only to n-gons"),
         ({"discs": []}, "no 'aperture'"),
         ({"schema_version": 3, "aperture": {"shape": "circle"}}, "schema_version"),
         ({"aperture": {"shape": None}}, "fitted no aperture"),
@@ -382,7 +456,7 @@ def test_corner_toggle_reveals_the_controls(browser, server, artifacts):
             assert page.is_visible(selector), f"{selector} is hidden in edit mode"
         assert not page.is_visible("#blades") and not page.is_visible("#aspect")
         options = page.eval_on_selector_all("#shape option", "options => options.map(o => o.value)")
-        assert options == list(SHAPES)
+        assert options == [name for name, spec in SHAPES.items() if not spec.tabulated]  # the viewer draws no mask yet
         page.select_option("#shape", "ngon")
         assert page.is_visible("#blades") and not page.is_visible("#aspect")
         page.select_option("#shape", "slit")
@@ -483,6 +557,19 @@ def test_matched_aperture_from_a_compare_result(browser, server, tmp_path):
         assert page.input_value("#shape") == "ngon" and page.is_visible("#blades")
         assert "ngon(9) 12.5°, f/4" in page.text_content("#settings")
         assert "result.json" in page.text_content("#message")
+
+        # Schema 2: the real-lens features set their sliders.
+        features = dict(roundness=0.35, squeeze=1.25, rim=0.5, vignetting={"radius": 1.4, "shift": 0.9}, chromatic={"red": 0.02, "blue": -0.03})
+        path.write_text(json.dumps({**compare_document(shape="ngon", blades=9, angle_deg=12.5, **features), "schema_version": 2}))
+        restarts = page.evaluate("window.bokehfitViewer.restarts")
+        page.set_input_files("#matched-file", str(path))
+        page.wait_for_function(f"window.bokehfitViewer.restarts > {restarts}", timeout=PAGE_TIMEOUT_MS)
+        state = page.evaluate("window.bokehfitViewer.state")
+        assert (state["roundness"], state["squeeze"], state["rim"]) == (0.35, 1.25, 0.5)
+        assert (state["vignetting"], state["vignetting_radius"], state["vignetting_shift"]) == (True, 1.4, 0.9)
+        assert (state["chromatic_red"], state["chromatic_blue"]) == (0.02, -0.03)
+        assert page.input_value("#roundness") == "0.35" and page.is_checked("#vignetting")
+        assert "roundness 0.35" in page.text_content("#settings")
 
         bad = tmp_path / "bad.json"
         bad.write_text(json.dumps({"discs": []}))

@@ -1,4 +1,4 @@
-"""Aperture shapes (design.md §3) and their uniform samplers.
+"""Aperture shapes (design.md §3), their real-lens features (§3b) and their samplers.
 
 The samplers ``sample_<shape>(u)`` are the NumPy twins of the WGSL functions
 of the same names in ``shaders/apertures.wgsl``.
@@ -20,10 +20,60 @@ from bokehfit.apertures.samplers import (
     sample_triangle,
     sample_uniform_triangle,
     uniform_triangle_pdf,
+    ROUNDNESS_POLYGON,
+    apply_squeeze,
+    invert_rounded_ngon_sample,
+    rim_radius,
+    rounded_ngon_pdf,
+    sample_rounded_ngon,
+    vignetting_weight,
 )
-from bokehfit.apertures.shapes import SHADER_FAMILIES, SHAPES, Aperture, ShapeSpec, canonical_angle, make_aperture
+from bokehfit.apertures.mask import MaskTable, invert_mask_sample, load_mask, mask_pdf, sample_mask
+from bokehfit.apertures.outline import Arc, Outline, Segment
+from bokehfit.apertures.shapes import (
+    APERTURE_PARAM_FIELDS,
+    CHANNELS,
+    FEATURES,
+    SHADER_FAMILIES,
+    SHAPES,
+    Aperture,
+    Chromatic,
+    ParameterSpec,
+    ShapeSpec,
+    Vignetting,
+    aperture_rows_to_image,
+    aperture_to_image,
+    canonical_angle,
+    image_to_aperture,
+    make_aperture,
+    parse_shape,
+)
 
 __all__ = [
+    "APERTURE_PARAM_FIELDS",
+    "Arc",
+    "CHANNELS",
+    "Chromatic",
+    "FEATURES",
+    "MaskTable",
+    "Outline",
+    "ParameterSpec",
+    "ROUNDNESS_POLYGON",
+    "Segment",
+    "Vignetting",
+    "aperture_rows_to_image",
+    "aperture_to_image",
+    "apply_squeeze",
+    "image_to_aperture",
+    "invert_mask_sample",
+    "load_mask",
+    "mask_pdf",
+    "sample_mask",
+    "invert_rounded_ngon_sample",
+    "rim_radius",
+    "rounded_ngon_pdf",
+    "sample_rounded_ngon",
+    "vignetting_weight",
     "Aperture",
     "CIRCLE_RADIUS",
     "SHADER_FAMILIES",
@@ -35,6 +85,7 @@ __all__ = [
     "invert_uniform_triangle_sample",
     "make_aperture",
     "ngon_circumradius",
+    "parse_shape",
     "sample_circle",
     "sample_hexagon",
     "sample_ngon",

@@ -1,21 +1,57 @@
-"""The aperture shapes of design.md §3, in one registry.
+"""The one aperture model: the shapes of design.md §3 and the real-lens features of §3b.
 
 A shape is named (``circle``, ``square``, ``slit``, ``triangle``, ``pentagon``,
 ``hexagon``, ``star``, ``ngon``); an :class:`Aperture` is a shape with its
-parameters (angle, blade count, slit aspect). At scale 1 every aperture has
-area exactly 1. Adding a shape is one :class:`ShapeSpec` entry in ``SHAPES``.
+parameters (angle, blade count, slit aspect) and features (``roundness``,
+``squeeze``, ``vignetting``, ``rim``, ``chromatic``). It owns everything about
+itself: the exact :meth:`~Aperture.outline` and :meth:`~Aperture.area`, the
+symmetry, the near disc (:meth:`~Aperture.near`), the fit parameters
+(:attr:`~Aperture.parameters`, :meth:`~Aperture.replace`), and sampling with
+its pdf and inverse (:meth:`~Aperture.sample`, :meth:`~Aperture.pdf`,
+:meth:`~Aperture.invert`; the WGSL twin is ``sample_aperture_params``). At
+scale 1 every unclipped aperture has area exactly 1. Adding a shape is one
+:class:`ShapeSpec` entry in ``SHAPES``. The custom ``mask`` shape of §3b is
+tabulated (:class:`~bokehfit.apertures.mask.MaskTable`): its density is the
+transmission, its outline the 50 % transmission contour.
+
+:func:`image_to_aperture` is the one conversion from image offsets to the
+aperture frame (design.md §2).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import os
+import re
+from collections.abc import Mapping
 from dataclasses import dataclass
 import numpy as np
 
 from bokehfit.apertures import samplers
+from bokehfit.apertures.mask import MaskTable, invert_mask_sample, load_mask, mask_pdf, sample_mask
+from bokehfit.apertures.outline import Arc, Outline, Segment, clip_by_circle
 from bokehfit.errors import InputError, check_finite
+from bokehfit.validate import RANGES, check
 
-__all__ = ["Aperture", "ShapeSpec", "SHAPES", "SHADER_FAMILIES", "make_aperture", "canonical_angle"]
+__all__ = [
+    "APERTURE_PARAM_FIELDS",
+    "Aperture",
+    "CHANNELS",
+    "Chromatic",
+    "FEATURES",
+    "ParameterSpec",
+    "ShapeSpec",
+    "SHAPES",
+    "SHADER_FAMILIES",
+    "Vignetting",
+    "aperture_rows_to_image",
+    "aperture_to_image",
+    "canonical_angle",
+    "image_to_aperture",
+    "make_aperture",
+    "parse_shape",
+]
 
 #: Slit aspect (width / height) when none is given (design.md §3).
 DEFAULT_SLIT_ASPECT = 0.3
@@ -26,7 +62,7 @@ SLIT_ASPECT_RANGE = (1e-3, 1e3)
 
 #: The sampler families of shaders/apertures.wgsl, in the order of their
 #: ``SHAPE_*`` constants (the constants are generated from this tuple).
-SHADER_FAMILIES = ("circle", "square", "slit", "ngon", "star")
+SHADER_FAMILIES = ("circle", "square", "slit", "ngon", "star", "mask")
 
 
 @dataclass(frozen=True)
@@ -38,23 +74,37 @@ class ShapeSpec:
     fixed_blades: int | None = None  #: blade count fixed by the name (triangle: 3)
     takes_blades: bool = False  #: the user chooses the blade count (ngon)
     takes_aspect: bool = False  #: the user chooses the aspect (slit)
+    symmetry: float | None = None  #: degrees; None: 360°/blades (n-gons) or no angle (circle)
+    tabulated: bool = False  #: drawn from a transmission image (``mask``), not an outline
 
     @property
     def shader_id(self) -> int:
         return SHADER_FAMILIES.index(self.family)
+
+    @property
+    def rounds(self) -> bool:
+        """Whether ``roundness`` applies: the blade edges of n-gons (design.md §3b)."""
+        return self.family in ("ngon", "square")
+
+    def symmetry_deg(self, blades: int | None) -> float | None:
+        """Smallest rotation mapping the shape onto itself; None for the circle."""
+        if self.symmetry is not None:
+            return self.symmetry
+        return None if self.family == "circle" else 360.0 / blades
 
 
 SHAPES: dict[str, ShapeSpec] = {
     spec.name: spec
     for spec in (
         ShapeSpec("circle", "circle"),
-        ShapeSpec("square", "square", fixed_blades=4),
-        ShapeSpec("slit", "slit", takes_aspect=True),
+        ShapeSpec("square", "square", fixed_blades=4, symmetry=90.0),
+        ShapeSpec("slit", "slit", takes_aspect=True, symmetry=180.0),
         ShapeSpec("triangle", "ngon", fixed_blades=3),
         ShapeSpec("pentagon", "ngon", fixed_blades=5),
         ShapeSpec("hexagon", "ngon", fixed_blades=6),
-        ShapeSpec("star", "star"),
+        ShapeSpec("star", "star", symmetry=72.0),
         ShapeSpec("ngon", "ngon", takes_blades=True),
+        ShapeSpec("mask", "mask", symmetry=360.0, tabulated=True),
     )
 }
 
@@ -70,13 +120,90 @@ def canonical_angle(angle_deg: float, symmetry_deg: float | None) -> float | Non
 
 
 @dataclass(frozen=True)
+class Vignetting:
+    """Cat-eye vignetting (design.md §3b): the barrel's circle, radius·R0 at shift·R0·q."""
+
+    radius: float
+    shift: float = 0.0
+
+
+@dataclass(frozen=True)
+class Chromatic:
+    """Longitudinal colour (design.md §3b): red and blue disc diameters over green's, minus 1."""
+
+    red: float
+    blue: float
+
+
+@dataclass(frozen=True)
+class ParameterSpec:
+    """One parameter a fit may vary: its name (a keyword of :meth:`Aperture.replace`), bounds and unit.
+
+    ``periodic`` is the period where the parameter wraps (the angle: the
+    shape's symmetry, in degrees), None otherwise.
+    """
+
+    name: str
+    bounds: tuple[float, float]
+    unit: str = ""
+    periodic: float | None = None
+
+
+#: The §3b features in the order :attr:`Aperture.parameters` lists them.
+FEATURES = ("roundness", "squeeze", "rim", "vignetting", "chromatic")
+#: Colour channels of :meth:`Aperture.sample`, in the order of the WGSL ``CHANNEL_*`` ids
+#: (generated from this tuple); green (and None) is the reference size.
+CHANNELS = ("green", "red", "blue")
+#: Chord error of :meth:`Aperture.vertices` where the outline has arcs (unit-area units).
+VERTICES_MAX_ERROR = 1e-6
+
+#: The one description of the WGSL ``ApertureParams`` struct (bokehfit.gpu.layout
+#: builds the struct and its NumPy dtype from it; :meth:`Aperture.shader_params`
+#: fills it). ``vignetting_radius`` 0 means no vignetting.
+APERTURE_PARAM_FIELDS = (
+    ("shape", "u32"),
+    ("blades", "u32"),
+    ("aspect", "f32"),
+    ("roundness", "f32"),
+    ("cos_angle", "f32"),
+    ("sin_angle", "f32"),
+    ("squeeze", "f32"),
+    ("rim", "f32"),
+    ("vignetting_radius", "f32"),
+    ("vignetting_shift", "f32"),
+    ("field_x", "f32"),
+    ("field_y", "f32"),
+    ("chromatic_red", "f32"),
+    ("chromatic_blue", "f32"),
+    ("mask_width", "u32"),
+    ("mask_height", "u32"),
+    ("mask_cell", "f32"),
+)
+
+
+@dataclass(frozen=True)
 class Aperture:
-    """A shape with its parameters, at unit area. Build it with :func:`make_aperture`."""
+    """A shape with its parameters and real-lens features, at unit area. Build it with :func:`make_aperture`.
+
+    The geometry is: the shape at angle 0 (design.md §3, with rounded blades),
+    rotated by ``angle_deg``, squeezed (x/√squeeze, y·√squeeze), then clipped
+    by the vignetting circle at a field position; ``rim`` weights the light
+    across it and ``chromatic`` scales the red and blue discs (design.md §3b).
+    ``features`` names the §3b features switched on for fitting even at their
+    neutral values (see :attr:`parameters`).
+    """
 
     shape: str
     angle_deg: float = 0.0
     blades: int | None = None
     aspect: float | None = None
+    roundness: float = 0.0
+    squeeze: float = 1.0
+    vignetting: Vignetting | None = None
+    rim: float = 0.0
+    chromatic: Chromatic | None = None
+    features: frozenset = frozenset()
+    mask: MaskTable | None = None  #: the transmission image of shape ``mask`` (design.md §3b)
 
     @property
     def spec(self) -> ShapeSpec:
@@ -84,69 +211,532 @@ class Aperture:
 
     @property
     def symmetry_deg(self) -> float | None:
-        """Smallest rotation that maps the shape onto itself; None for the circle."""
-        family = self.spec.family
-        if family == "circle":
-            return None
-        if family == "square":
-            return 90.0
-        if family == "slit":
-            return 180.0
-        if family == "star":
-            return 72.0
-        return 360.0 / self.blades
+        """Period of ``angle_deg``: the smallest rotation mapping the shape onto itself; None for the circle.
+
+        The squeeze and the vignetting act after the rotation, so they do not change it.
+        """
+        return self.spec.symmetry_deg(self.blades)
+
+    @property
+    def odd_symmetry(self) -> bool:
+        """True where a near disc shows a visible rotation: 180° is not a multiple of the symmetry (design.md §2)."""
+        symmetry = self.symmetry_deg
+        return symmetry is not None and not math.isclose(math.remainder(180.0, symmetry), 0.0, abs_tol=1e-9)
+
+    @property
+    def has_angle(self) -> bool:
+        """Whether ``angle_deg`` means anything: False for the circle, whose rotations are all alike."""
+        return self.symmetry_deg is not None
+
+    @property
+    def is_circle(self) -> bool:
+        """Whether the outline is the plain circle of radius 1/√π: no corners to draw or sample (unsqueezed)."""
+        return not self.has_angle and self.squeeze == 1.0
+
+    @property
+    def label(self) -> str:
+        """The shape's name as ``compare --shapes`` takes it: ``hexagon``, ``ngon(9)`` (see :func:`parse_shape`)."""
+        return f"ngon({self.blades})" if self.spec.takes_blades else self.shape
+
+    @property
+    def display_name(self) -> str:
+        """The shape's name for people: ``hexagon``, ``9-blade polygon``."""
+        return f"{self.blades}-blade polygon" if self.spec.takes_blades else self.shape
+
+    def is_named(self, text: str) -> bool:
+        """Whether ``text`` names this aperture's shape (see :func:`parse_shape`).
+
+        A registry name matches apertures of that name (a bare ``ngon``, every
+        blade count); ``ngon(N)`` matches every n-gon of N blades, so
+        ``ngon(6)`` names the hexagon too. Raises InputError for an unknown name.
+
+        Examples
+        --------
+        >>> make_aperture("hexagon").is_named("ngon(6)"), make_aperture("ngon(9)").is_named("ngon")
+        (True, True)
+        """
+        shape, blades = parse_shape(text)
+        if blades is None:
+            return shape == self.shape
+        return SHAPES[shape].family == self.spec.family and blades == self.blades
 
     @property
     def canonical_angle_deg(self) -> float | None:
         """The angle reduced to [0, symmetry); None for the circle."""
         return canonical_angle(self.angle_deg, self.symmetry_deg)
 
-    def vertices(self) -> np.ndarray | None:
-        """Counter-clockwise outline vertices at unit area, rotated; None for the circle."""
-        family = self.spec.family
-        if family == "circle":
-            return None
-        if family == "square":
-            base = np.array([[0.5, -0.5], [0.5, 0.5], [-0.5, 0.5], [-0.5, -0.5]])
-        elif family == "slit":
-            w, h = 0.5 * self.aspect, 0.5 / self.aspect
-            base = np.array([[w, -h], [w, h], [-w, h], [-w, -h]])
-        else:
-            radii = _fan_radii(self)
-            angles = 2.0 * np.pi * np.arange(len(radii)) / len(radii)
-            base = np.stack([radii * np.cos(angles), radii * np.sin(angles)], axis=-1)
-        return base @ self.rotation().T
+    @property
+    def enabled_features(self) -> tuple[str, ...]:
+        """The §3b features that are on: switched on by :meth:`with_features` or away from their neutral value."""
+        neutral = {"roundness": 0.0, "squeeze": 1.0, "rim": 0.0, "vignetting": None, "chromatic": None}
+        return tuple(f for f in FEATURES if f in self.features or getattr(self, f) != neutral[f])
+
+    @property
+    def parameters(self) -> dict[str, ParameterSpec]:
+        """What a fit may vary, in order: name → :class:`ParameterSpec` (names are :meth:`replace` keywords).
+
+        ``angle_deg`` (periodic with the symmetry; absent for the circle),
+        ``aspect`` for the slit; then each §3b feature only where it is on
+        (:attr:`enabled_features`): ``roundness`` (n-gons), ``squeeze``,
+        ``rim``, ``vignetting_radius`` and ``vignetting_shift``,
+        ``chromatic_red`` and ``chromatic_blue``. Bounds are those of
+        ``bokehfit.validate.RANGES``.
+        """
+        found: dict[str, ParameterSpec] = {}
+
+        def add(name, quantity, unit="", periodic=None, bounds=None):
+            rule = RANGES[quantity]
+            found[name] = ParameterSpec(name, bounds or (rule.low, rule.high), unit, periodic)
+
+        if self.symmetry_deg is not None:
+            add("angle_deg", "angle_deg", "°", self.symmetry_deg, (0.0, self.symmetry_deg))
+        if self.spec.takes_aspect:
+            add("aspect", "aspect")
+        on = self.enabled_features
+        for feature in ("roundness", "squeeze", "rim"):
+            if feature in on:
+                add(feature, feature)
+        if "vignetting" in on:
+            add("vignetting_radius", "vignetting_radius")
+            add("vignetting_shift", "vignetting_shift")
+        if "chromatic" in on:
+            add("chromatic_red", "chromatic")
+            add("chromatic_blue", "chromatic")
+        return found
+
+    @property
+    def values(self) -> dict[str, float]:
+        """The current value of each of :attr:`parameters`, by name: the fit's parameter vector, named.
+
+        ``aperture.replace(**aperture.values)`` is the aperture again.
+        """
+        pairs = {"vignetting_radius": ("vignetting", "radius"), "vignetting_shift": ("vignetting", "shift"),
+                 "chromatic_red": ("chromatic", "red"), "chromatic_blue": ("chromatic", "blue")}
+        found = {}
+        for name in self.parameters:
+            if name in pairs:
+                feature, member = pairs[name]
+                found[name] = float(getattr(getattr(self.with_features(feature), feature), member))
+            else:
+                found[name] = float(getattr(self, name))
+        return found
+
+    @classmethod
+    def from_json(cls, data: Mapping) -> Aperture:
+        """The aperture of a JSON ``aperture`` object (``compare --json``, design.md §7); null values are defaults.
+
+        Examples
+        --------
+        >>> Aperture.from_json({"shape": "ngon", "blades": 9, "angle_deg": 10.0}).describe()
+        'ngon(9) 10°'
+        """
+        if not isinstance(data, Mapping) or "shape" not in data:
+            raise InputError(f"aperture must be a mapping with a 'shape' key (got {data!r})")
+        keys = ("blades", "aspect", "roundness", "squeeze", "vignetting", "rim", "chromatic")
+        given = {key: data[key] for key in (*keys, "mask") if data.get(key) is not None}
+        return make_aperture(data["shape"], data.get("angle_deg") or 0.0, **given)
+
+    def with_features(self, *names: str) -> Aperture:
+        """A copy with the §3b features ``names`` switched on at their neutral values (kept where set).
+
+        Vignetting starts as a barrel that cuts nothing (radius covering the
+        aperture, shift 0), colour as ``Chromatic(0, 0)``.
+        """
+        unknown = [n for n in names if n not in FEATURES]
+        if unknown:
+            raise InputError(f"features must be among {', '.join(FEATURES)} (got {', '.join(map(repr, unknown))})")
+        if "roundness" in names and not self.spec.rounds:
+            raise InputError(f"roundness applies only to n-gons (got shape {self.shape!r})")
+        values = {}
+        if "vignetting" in names and self.vignetting is None:
+            values["vignetting"] = Vignetting(max(1.0, math.ceil(self.extent() / samplers.CIRCLE_RADIUS * 1e6) / 1e6), 0.0)
+        if "chromatic" in names and self.chromatic is None:
+            values["chromatic"] = Chromatic(0.0, 0.0)
+        return dataclasses.replace(self, features=self.features | frozenset(names), **values)
+
+    def replace(self, **values) -> Aperture:
+        """A validated copy with ``values`` changed: any field, or a name of :attr:`parameters`.
+
+        ``vignetting_radius``/``vignetting_shift`` and ``chromatic_red``/``chromatic_blue``
+        change one member of the pair (the feature must be on).
+        """
+        fields = {
+            "angle_deg": self.angle_deg,
+            "blades": self.blades if self.spec.takes_blades else None,
+            "aspect": self.aspect,
+            "roundness": self.roundness,
+            "squeeze": self.squeeze,
+            "vignetting": self.vignetting,
+            "rim": self.rim,
+            "chromatic": self.chromatic,
+            "mask": self.mask,
+        }
+        shape = values.pop("shape", self.shape)
+        for pair, keys in (("vignetting", ("radius", "shift")), ("chromatic", ("red", "blue"))):
+            given = {key: values.pop(f"{pair}_{key}") for key in keys if f"{pair}_{key}" in values}
+            if given:
+                current = fields[pair] if fields[pair] is not None else getattr(self.with_features(pair), pair)
+                fields[pair] = dataclasses.replace(current, **given)
+        unknown = set(values) - set(fields)
+        if unknown:
+            raise InputError(f"replace() takes fields or parameters of the aperture (got {', '.join(sorted(unknown))})")
+        fields.update(values)
+        rebuilt = make_aperture(shape, **fields)
+        features = self.features if rebuilt.spec.rounds else self.features - {"roundness"}
+        return dataclasses.replace(rebuilt, features=features)
+
+    def near(self) -> Aperture:
+        """The aperture as a near disc shows it (design.md §2, §3b).
+
+        The far disc turned by 180°, the vignetting cut included (its centre
+        −shift·R0·q: the shift changes sign); ``rim`` and ``chromatic`` change sign.
+        """
+        vignetting = None if self.vignetting is None else Vignetting(self.vignetting.radius, -self.vignetting.shift)
+        chromatic = None if self.chromatic is None else Chromatic(-self.chromatic.red, -self.chromatic.blue)
+        return dataclasses.replace(
+            self, angle_deg=self.angle_deg + 180.0, rim=-self.rim, vignetting=vignetting, chromatic=chromatic
+        )
+
+    # --- geometry ---------------------------------------------------------------------
 
     def rotation(self) -> np.ndarray:
         """2×2 matrix R(angle): p' = R·p (design.md §3)."""
         a = math.radians(self.angle_deg)
         return np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
 
-    def sample(self, u: np.ndarray) -> np.ndarray:
-        """Points uniform over the rotated unit-area aperture, from ``u`` in [0, 1)²."""
+    def squeeze_matrix(self) -> np.ndarray:
+        """diag(1/√squeeze, √squeeze): the squeeze at unit area (:func:`samplers.apply_squeeze`)."""
+        root = math.sqrt(self.squeeze)
+        return np.array([[1.0 / root, 0.0], [0.0, root]])
+
+    def _rounded_fan(self) -> tuple[int, float] | None:
+        """(n, turn) where the shape is sampled as a rounded n-gon turned by ``turn`` radians, else None.
+
+        Every ngon is; the square is the ngon 4 turned by 45° (design.md §3)
+        once it has rounded blades (at roundness 0 it keeps its own sampler).
+        """
         family = self.spec.family
+        if family == "ngon":
+            return self.blades, 0.0
+        if family == "square" and self.roundness != 0.0:
+            return 4, math.pi / 4.0
+        return None
+
+    def _outline_at_zero(self) -> Outline:
+        family = self.spec.family
+        if self.mask is not None:
+            return _mask_outline(self.mask)
+        if family == "circle":
+            return Outline(((Arc((0.0, 0.0), (samplers.CIRCLE_RADIUS,) * 2, 0.0, 2.0 * math.pi),),))
+        fan = self._rounded_fan()
+        if fan is not None and self.roundness >= samplers.ROUNDNESS_POLYGON:
+            n, turn = fan
+            geometry = samplers.RoundedNgon(n, self.roundness)
+            c, rho, alpha = geometry.centre_offset, geometry.arc_radius, geometry.half_angle
+            arcs = []
+            for k in range(n):
+                phi = float(geometry.mid_angle(k)) + turn
+                arcs.append(Arc((c * math.cos(phi), c * math.sin(phi)), (rho, rho), phi - alpha, phi + alpha))
+            return Outline((tuple(arcs),))
+        corners = self._base_vertices()
+        return Outline((tuple(Segment(tuple(a), tuple(b)) for a, b in zip(corners, np.roll(corners, -1, axis=0))),))
+
+    def _base_vertices(self) -> np.ndarray:
+        family = self.spec.family
+        if family == "square":
+            return np.array([[0.5, -0.5], [0.5, 0.5], [-0.5, 0.5], [-0.5, -0.5]])
         if family == "slit":
-            p = samplers.sample_slit(u, self.aspect)
-        elif family == "ngon":
-            p = samplers.sample_ngon(u, self.blades)
-        else:
-            p = getattr(samplers, f"sample_{family}")(u)
-        return p @ self.rotation().T
+            w, h = 0.5 * self.aspect, 0.5 / self.aspect
+            return np.array([[w, -h], [w, h], [-w, h], [-w, -h]])
+        radii = _fan_radii(self)
+        angles = 2.0 * np.pi * np.arange(len(radii)) / len(radii)
+        return np.stack([radii * np.cos(angles), radii * np.sin(angles)], axis=-1)
+
+    def outline(self, field_position=None) -> Outline:
+        """The exact outline at unit area (rotated, squeezed), clipped by the vignetting at ``field_position``.
+
+        ``field_position`` q is the disc's position from the image centre in
+        half-diagonals, y up (design.md §3b); it matters only with vignetting
+        (None: the unclipped outline). The clipped outline keeps the scale of
+        the unclipped one: its area is the light that passes.
+        """
+        outline = self._outline_at_zero().transformed(self.rotation())
+        if self.squeeze != 1.0:
+            outline = outline.transformed(self.squeeze_matrix())
+        if self.vignetting is None or field_position is None:
+            return outline
+        q = _field_position(field_position)
+        centre = self.vignetting.shift * samplers.CIRCLE_RADIUS * q
+        return clip_by_circle(outline, centre, self.vignetting.radius * samplers.CIRCLE_RADIUS)
+
+    def area(self, field_position=None) -> float:
+        """Area of :meth:`outline`: 1 unclipped, the light that passes (< 1) where the barrel cuts it.
+
+        A mask's transmitted area is 1 by construction (its outline, the 50 % contour, is only a drawing).
+        """
+        if self.mask is not None:
+            return 1.0
+        return self.outline(field_position).area()
+
+    def vertices(self) -> np.ndarray | None:
+        """Counter-clockwise outline vertices at unit area, rotated and squeezed; None for the plain circle.
+
+        Straight-edged shapes give their exact corners; shapes with arcs (rounded
+        blades, a squeezed circle) a dense polygon within :data:`VERTICES_MAX_ERROR`.
+        """
+        if self.is_circle:
+            return None
+        outline = self.outline()
+        if all(isinstance(piece, Segment) for piece in outline.pieces):
+            return np.array([piece.start for piece in outline.pieces])
+        return outline.polyline(VERTICES_MAX_ERROR)
 
     def extent(self) -> float:
-        """Largest distance of the unit-area outline from the centre."""
+        """Largest distance of the unit-area (unclipped) outline from the centre (a mask: of its transmitting cells)."""
+        if self.mask is not None:
+            half = self.mask.extent()
+            corners = np.array([[half, half], [half, -half], [-half, half], [-half, -half]])
+            corners = corners @ (self.squeeze_matrix() @ self.rotation()).T
+            return float(np.max(np.hypot(corners[:, 0], corners[:, 1])))
+        if self.squeeze == 1.0:
+            if self.spec.family == "circle":
+                return samplers.CIRCLE_RADIUS
+            if self._rounded_fan() is not None and self.roundness >= samplers.ROUNDNESS_POLYGON:
+                return samplers.RoundedNgon(self._rounded_fan()[0], self.roundness).circumradius  # arcs lie inside the circumcircle
         verts = self.vertices()
-        if verts is None:
-            return samplers.CIRCLE_RADIUS
         return float(np.max(np.hypot(verts[:, 0], verts[:, 1])))
 
+    # --- sampling ---------------------------------------------------------------------
+
+    def _radial_fraction_at_zero(self, p: np.ndarray) -> np.ndarray:
+        """|p| over the outline's distance in p's direction, for p of the shape at angle 0."""
+        family = self.spec.family
+        fan = self._rounded_fan()
+        if fan is not None:
+            return samplers._rounded_ngon_polar(_turn(p, -fan[1]), fan[0], self.roundness)[2]
+        if family == "circle":
+            return np.hypot(p[..., 0], p[..., 1]) / samplers.CIRCLE_RADIUS
+        if family in ("square", "slit"):
+            w, h = (0.5, 0.5) if family == "square" else (0.5 * self.aspect, 0.5 / self.aspect)
+            return np.maximum(np.abs(p[..., 0]) / w, np.abs(p[..., 1]) / h)
+        corners = self._base_vertices()  # star: the fan triangle's outer edge
+        n = len(corners)
+        theta = np.mod(np.arctan2(p[..., 1], p[..., 0]), 2.0 * np.pi)
+        k = np.minimum(np.floor(theta * n / (2.0 * np.pi)), n - 1).astype(np.int64)
+        a, b = corners[k], corners[(k + 1) % n]
+        normal = np.stack([b[..., 1] - a[..., 1], a[..., 0] - b[..., 0]], axis=-1)
+        return np.sum(p * normal, axis=-1) / np.sum(a * normal, axis=-1)
+
+    def _sample_at_zero(self, u: np.ndarray) -> np.ndarray:
+        family = self.spec.family
+        if self.mask is not None:
+            return sample_mask(u, self.mask)
+        fan = self._rounded_fan()
+        if fan is not None or family == "star":  # fans: the radial fraction is √u₁, so the rim remaps u₁
+            if self.rim != 0.0:
+                u = np.asarray(u, dtype=np.float64)
+                u = np.stack([u[..., 0], samplers.rim_radius(u[..., 1], self.rim) ** 2], axis=-1)
+            if family == "star":
+                return samplers.sample_star(u)
+            p = samplers.sample_rounded_ngon(u, fan[0], self.roundness)
+            return p if fan[1] == 0.0 else _turn(p, fan[1])
+        p = samplers.sample_slit(u, self.aspect) if family == "slit" else getattr(samplers, f"sample_{family}")(u)
+        if self.rim == 0.0:
+            return p
+        fraction = self._radial_fraction_at_zero(p)  # its square is uniform over a star-shaped area
+        safe = np.where(fraction > 0.0, fraction, 1.0)
+        scale = np.where(fraction > 0.0, samplers.rim_radius(fraction * fraction, self.rim) / safe, 0.0)
+        return p * scale[..., None]
+
+    def sample(self, u: np.ndarray, field_position=None, channel: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Points of the aperture and their weights, from ``u`` in [0, 1)² (shape (..., 2)).
+
+        The points follow the density :meth:`pdf` (uniform, or the rim profile);
+        their weights are 1, or 0 for points the vignetting barrel stops at
+        ``field_position`` (the light loss). ``channel`` ``"red"`` or ``"blue"``
+        scales the points by (1 + red) or (1 + blue) (design.md §3b); None or
+        ``"green"`` is the reference. With every feature at its default the
+        points are today's ``sample_<shape>`` rotated, bit for bit.
+        """
+        p = self._sample_at_zero(u) @ self.rotation().T
+        if self.squeeze != 1.0:
+            p = samplers.apply_squeeze(p, self.squeeze)
+        if self.vignetting is None:
+            weights = np.ones(p.shape[:-1])
+        else:
+            q = _field_position((0.0, 0.0) if field_position is None else field_position)
+            weights = samplers.vignetting_weight(p, q, self.vignetting.radius, self.vignetting.shift)
+        return p * self._channel_scale(channel), weights
+
+    def _channel_scale(self, channel: str | None) -> float:
+        if channel is not None and channel not in CHANNELS:
+            raise InputError(f"channel must be one of {', '.join(CHANNELS)} or None (got {channel!r})")
+        if self.chromatic is None or channel in (None, "green"):
+            return 1.0
+        return 1.0 + (self.chromatic.red if channel == "red" else self.chromatic.blue)
+
+    def _to_zero(self, p: np.ndarray, channel: str | None) -> tuple[np.ndarray, float]:
+        """p in the frame of the shape at angle 0 (undo colour scale, squeeze, rotation) and the Jacobian."""
+        scale = self._channel_scale(channel)
+        p = np.asarray(p, dtype=np.float64) / scale
+        if self.squeeze != 1.0:
+            p = samplers.apply_squeeze(p, 1.0 / self.squeeze)
+        return p @ self.rotation(), 1.0 / (scale * scale)
+
+    def pdf(self, p: np.ndarray, channel: str | None = None) -> np.ndarray:
+        """Density of the points of :meth:`sample` (the weights carry the vignetting): the rim profile inside, 0 outside."""
+        p0, jacobian = self._to_zero(p, channel)
+        if self.mask is not None:
+            return mask_pdf(p0, self.mask) * jacobian
+        fraction = self._radial_fraction_at_zero(p0)
+        return np.where(fraction <= 1.0 + 1e-12, samplers.rim_weight(fraction, self.rim) * jacobian, 0.0)
+
+    def invert(self, p: np.ndarray, channel: str | None = None) -> np.ndarray:
+        """The ``u`` that :meth:`sample` maps to ``p``, for every shape (the sampler's inverse, p inside)."""
+        family = self.spec.family
+        if self.mask is not None:
+            return invert_mask_sample(self._to_zero(p, channel)[0], self.mask)
+        p0, _ = self._to_zero(p, channel)
+        fan = self._rounded_fan()
+        if fan is not None or family == "star":
+            if family == "star":
+                u = samplers.invert_star_sample(p0)
+            else:
+                u = samplers.invert_rounded_ngon_sample(_turn(p0, -fan[1]), fan[0], self.roundness)
+            if self.rim != 0.0:
+                x = u[..., 1]  # the squared radial fraction; u₁ is its CDF
+                u = np.stack([u[..., 0], (1.0 - self.rim) * x + self.rim * x * x], axis=-1)
+            return u
+        if self.rim != 0.0:
+            fraction = self._radial_fraction_at_zero(p0)
+            x = fraction * fraction
+            original = np.sqrt((1.0 - self.rim) * x + self.rim * x * x)
+            safe = np.where(fraction > 0.0, fraction, 1.0)
+            p0 = p0 * np.where(fraction > 0.0, original / safe, 0.0)[..., None]
+        if family == "circle":
+            return samplers.invert_circle_sample(p0)
+        w, h = (0.5, 0.5) if family == "square" else (0.5 * self.aspect, 0.5 / self.aspect)
+        return np.stack([p0[..., 0] / (2.0 * w) + 0.5, p0[..., 1] / (2.0 * h) + 0.5], axis=-1)
+
+    def shader_params(self, field_position=None) -> dict:
+        """Values of the WGSL ``ApertureParams`` (:data:`APERTURE_PARAM_FIELDS`) for this aperture."""
+        a = math.radians(self.angle_deg)
+        q = _field_position((0.0, 0.0) if field_position is None else field_position)
+        return {
+            "shape": self.spec.shader_id,
+            "blades": self.blades or 0,
+            "aspect": float(self.aspect or 1.0),
+            "roundness": self.roundness,
+            "cos_angle": math.cos(a),
+            "sin_angle": math.sin(a),
+            "squeeze": self.squeeze,
+            "rim": self.rim,
+            "vignetting_radius": 0.0 if self.vignetting is None else self.vignetting.radius,
+            "vignetting_shift": 0.0 if self.vignetting is None else self.vignetting.shift,
+            "field_x": float(q[0]),
+            "field_y": float(q[1]),
+            "chromatic_red": 0.0 if self.chromatic is None else self.chromatic.red,
+            "chromatic_blue": 0.0 if self.chromatic is None else self.chromatic.blue,
+            "mask_width": 0 if self.mask is None else self.mask.shape[1],
+            "mask_height": 0 if self.mask is None else self.mask.shape[0],
+            "mask_cell": 0.0 if self.mask is None else self.mask.cell,
+        }
+
     def describe(self) -> str:
-        """Short human name, e.g. ``hexagon 20°`` or ``ngon(9) 3.5°``."""
+        """Short human name, e.g. ``hexagon 20°``, ``ngon(9) 3.5° roundness 0.4``."""
         name = f"ngon({self.blades})" if self.spec.takes_blades else self.shape
+        if self.mask is not None:
+            name = self.mask.describe()
         if self.spec.takes_aspect:
             name += f"(aspect {self.aspect:g})"
         angle = self.canonical_angle_deg
-        return name if angle is None else f"{name} {round(angle, 2):g}°"
+        text = name if angle is None else f"{name} {round(angle, 2):g}°"
+        for feature in ("roundness", "squeeze", "rim"):
+            if feature in self.enabled_features:
+                text += f" {feature} {getattr(self, feature):g}"
+        if self.vignetting is not None:
+            text += f" vignetting {self.vignetting.radius:g}/{self.vignetting.shift:g}"
+        if self.chromatic is not None:
+            text += f" chromatic {self.chromatic.red:+g}/{self.chromatic.blue:+g}"
+        return text
+
+
+def _turn(p: np.ndarray, angle_rad: float) -> np.ndarray:
+    """Points turned counter-clockwise by ``angle_rad``."""
+    c, s = math.cos(angle_rad), math.sin(angle_rad)
+    return np.stack([c * p[..., 0] - s * p[..., 1], s * p[..., 0] + c * p[..., 1]], axis=-1)
+
+
+def _field_position(value) -> np.ndarray:
+    """A field position q as a float (2,) array; InputError naming ``field_position`` otherwise."""
+    q = np.asarray(value, dtype=object)
+    if q.shape != (2,):
+        raise InputError(f"field_position must be a pair (x, y) in half-diagonals, y up (got {value!r})")
+    return np.array([check("field_position", v) for v in q], dtype=np.float64)
+
+
+def image_to_aperture(offsets_rc) -> np.ndarray:
+    """Image offsets (row, col) from a centre → aperture-frame (x, y): x = col, y = −row (design.md §2).
+
+    The one conversion from the image's row-down frame to the aperture's y-up frame.
+
+    Examples
+    --------
+    >>> image_to_aperture([[2.0, 3.0]])
+    array([[ 3., -2.]])
+    """
+    offsets = np.asarray(offsets_rc, dtype=np.float64)
+    return np.stack([offsets[..., 1], -offsets[..., 0]], axis=-1)
+
+
+def aperture_to_image(points_xy) -> np.ndarray:
+    """Inverse of :func:`image_to_aperture`: aperture (x, y) → image offsets (row, col) = (−y, x)."""
+    points = np.asarray(points_xy, dtype=np.float64)
+    return np.stack([-points[..., 1], points[..., 0]], axis=-1)
+
+
+def aperture_rows_to_image(grid) -> np.ndarray:
+    """A grid whose rows run up in aperture y (first row lowest) → image row order (row downward).
+
+    The row-order face of :func:`aperture_to_image` (image row = −y): for
+    kernels computed or rasterised on the aperture frame's y-up grid.
+
+    Examples
+    --------
+    >>> aperture_rows_to_image([[0, 1], [2, 3]])
+    array([[2, 3],
+           [0, 1]])
+    """
+    return np.ascontiguousarray(np.flip(np.asarray(grid), axis=0))
+
+
+#: Transmission level of a mask's drawn outline (design.md §3b), as a share of its largest transmission.
+MASK_OUTLINE_LEVEL = 0.5
+
+
+def _mask_outline(mask: MaskTable) -> Outline:
+    """The mask's outline at angle 0: its contour at MASK_OUTLINE_LEVEL of the largest transmission.
+
+    Marching squares (scikit-image ``find_contours``) on the image padded with
+    zeros, so every loop closes; vertices lie on lines between cell centres.
+    Loops run counter-clockwise around transmitting parts.
+    """
+    from skimage.measure import find_contours
+
+    image = np.pad(mask.transmission, 1)
+    h, w = mask.shape
+    loops = []
+    for contour in find_contours(image, MASK_OUTLINE_LEVEL * float(image.max())):
+        xy = np.stack([(contour[:, 1] - 0.5 - 0.5 * w) * mask.cell, (0.5 * h - contour[:, 0] + 0.5) * mask.cell], axis=-1)
+        if np.allclose(xy[0], xy[-1]):
+            xy = xy[:-1]
+        if len(xy) >= 3:
+            loops.append(xy)
+    # find_contours keeps the high values on one side; make the outer loops counter-clockwise.
+    signed = sum(0.5 * float(np.sum(xy[:, 0] * np.roll(xy[:, 1], -1) - np.roll(xy[:, 0], -1) * xy[:, 1])) for xy in loops)
+    if signed < 0.0:
+        loops = [xy[::-1] for xy in loops]
+    return Outline(tuple(tuple(Segment(tuple(a), tuple(b)) for a, b in zip(xy, np.roll(xy, -1, axis=0))) for xy in loops))
 
 
 def _fan_radii(aperture: Aperture) -> np.ndarray:
@@ -155,26 +745,77 @@ def _fan_radii(aperture: Aperture) -> np.ndarray:
     return np.full(aperture.blades, samplers.ngon_circumradius(aperture.blades))
 
 
+def parse_shape(text: str) -> tuple[str, int | None]:
+    """A shape's name as people write it → (registry shape, blade count or None).
+
+    The one parser of shape names: ``compare --shapes``, ``kernel --shape``,
+    ``similarity`` and :func:`make_aperture` all go through it. ``ngon(9)``
+    (spaces and case ignored) is the ngon with 9 blades; a registry name is
+    itself with no blade count.
+
+    Examples
+    --------
+    >>> parse_shape("ngon(9)"), parse_shape("Hexagon")
+    (('ngon', 9), ('hexagon', None))
+    """
+    if not isinstance(text, str):
+        raise InputError(f"shape must be one of {', '.join(SHAPES)} or ngon(N) (got {text!r})")
+    name = text.strip().lower()
+    if name in SHAPES:
+        return name, None
+    match = re.fullmatch(r"ngon\s*\(\s*(\d+)\s*\)", name)
+    if match is None:
+        raise InputError(f"shape must be one of {', '.join(SHAPES)} or ngon(N) (got {text!r})")
+    blades = int(match.group(1))
+    if not 3 <= blades <= MAX_BLADES:
+        raise InputError(f"blades must be an integer from 3 to {MAX_BLADES} for shape 'ngon' (got {text!r})")
+    return "ngon", blades
+
+
 def make_aperture(
     shape: str,
     angle_deg: float = 0.0,
     *,
     blades: int | None = None,
     aspect: float | None = None,
+    roundness: float = 0.0,
+    squeeze: float = 1.0,
+    vignetting: Vignetting | Mapping | None = None,
+    rim: float = 0.0,
+    chromatic: Chromatic | Mapping | None = None,
+    mask=None,
 ) -> Aperture:
     """Validate parameters and build an :class:`Aperture`.
 
     Parameters
     ----------
     shape : str
-        One of ``SHAPES`` (circle, square, slit, triangle, pentagon, hexagon, star, ngon).
+        One of ``SHAPES`` (circle, square, slit, triangle, pentagon, hexagon, star, ngon),
+        or ``ngon(N)`` (see :func:`parse_shape`).
     angle_deg : float
-        Counter-clockwise rotation from +x, degrees; any finite value.
+        Counter-clockwise rotation from +x, degrees, within ±1e9 (``bokehfit.validate.RANGES``).
     blades : int, optional
         Blade count: required for ``ngon`` (3 to 64); for triangle, pentagon,
         hexagon and square it may be given only with the shape's own count.
     aspect : float, optional
         Width over height of a ``slit`` (default 0.3).
+    roundness : float
+        Blade curvature R/ρ in [0, 1] (design.md §3b), n-gons only (triangle,
+        square, pentagon, hexagon, ngon); refused for circle, slit and star.
+    squeeze : float
+        Anamorphic squeeze in [0.001, 1000]; > 1 makes discs taller than wide.
+    vignetting : Vignetting or mapping {radius, shift}, optional
+        The barrel's cut: radius in [1, 1000], shift in [−1000, 1000] (units of R0 = 1/√π).
+    rim : float
+        Intensity profile in [−1, 1]: > 0 bright rim, < 0 bright centre.
+    chromatic : Chromatic or mapping {red, blue}, optional
+        Red and blue disc diameters over green's minus 1, each in [−0.5, 0.5].
+    mask : MaskTable, path or 2-D array, optional
+        The transmission image of shape ``mask`` (required there, refused
+        elsewhere): a :class:`~bokehfit.apertures.mask.MaskTable`, a PNG path
+        (:func:`~bokehfit.apertures.mask.load_mask`) or an array in [0, 1].
+        A mask takes squeeze and chromatic; rim and vignetting are refused
+        (no outline to measure ρ or to clip).
 
     Raises
     ------
@@ -186,10 +827,13 @@ def make_aperture(
     >>> make_aperture("hexagon", 20).describe()
     'hexagon 20°'
     """
-    if not isinstance(shape, str) or shape not in SHAPES:
-        raise InputError(f"shape must be one of {', '.join(SHAPES)} (got {shape!r})")
+    shape, named_blades = parse_shape(shape)
+    if named_blades is not None:
+        if blades is not None and blades != named_blades:
+            raise InputError(f"blades must be {named_blades} or omitted for shape 'ngon({named_blades})' (got {blades!r})")
+        blades = named_blades
     spec = SHAPES[shape]
-    angle_deg = check_finite("angle_deg", angle_deg)
+    angle_deg = check("angle_deg", angle_deg)
     if spec.takes_blades:
         if isinstance(blades, bool) or not isinstance(blades, (int, np.integer)) or not 3 <= blades <= MAX_BLADES:
             raise InputError(f"blades must be an integer from 3 to {MAX_BLADES} for shape 'ngon' (got {blades!r})")
@@ -206,5 +850,38 @@ def make_aperture(
             raise InputError(f"aspect must be between {low:g} and {high:g} (got {aspect!r})")
     elif aspect is not None:
         raise InputError(f"aspect applies only to shape 'slit' (got aspect={aspect!r} for {shape!r})")
-    return Aperture(shape, angle_deg, blades, aspect)
+    roundness = check("roundness", roundness)
+    if roundness != 0.0 and not spec.rounds:
+        raise InputError(
+            f"roundness applies only to n-gons (triangle, square, pentagon, hexagon, ngon), "
+            f"not to shape {shape!r} (got roundness={roundness!r})"
+        )
+    squeeze = check("squeeze", squeeze)
+    rim = check("rim", rim)
+    if vignetting is not None:
+        radius, shift = _pair(vignetting, Vignetting, ("radius", "shift"), "vignetting")
+        vignetting = Vignetting(check("vignetting_radius", radius, name="vignetting.radius"),
+                                check("vignetting_shift", shift, name="vignetting.shift"))
+    if chromatic is not None:
+        red, blue = _pair(chromatic, Chromatic, ("red", "blue"), "chromatic")
+        chromatic = Chromatic(check("chromatic", red, name="chromatic.red"), check("chromatic", blue, name="chromatic.blue"))
+    if spec.tabulated:
+        if mask is None:
+            raise InputError(f"mask is required for shape {shape!r}: a PNG path or a 2-D array of transmission in [0, 1]")
+        if not isinstance(mask, MaskTable):
+            mask = load_mask(mask) if isinstance(mask, (str, os.PathLike)) else MaskTable.from_array(mask)
+        if rim != 0.0 or vignetting is not None:
+            raise InputError(f"{'rim' if rim != 0.0 else 'vignetting'} does not apply to shape {shape!r} (a mask has no outline to measure it on)")
+    elif mask is not None:
+        raise InputError(f"mask applies only to shape 'mask' (got a mask for {shape!r})")
+    return Aperture(shape, angle_deg, blades, aspect, roundness, squeeze, vignetting, rim, chromatic, mask=mask)
+
+
+def _pair(value, kind, keys: tuple[str, str], name: str) -> tuple:
+    """The two members of a :class:`Vignetting`/:class:`Chromatic` given as one or as a mapping."""
+    if isinstance(value, kind):
+        return tuple(getattr(value, key) for key in keys)
+    if isinstance(value, Mapping) and set(value) <= set(keys) and keys[0] in value:
+        return value[keys[0]], value.get(keys[1], 0.0 if kind is Vignetting else None)
+    raise InputError(f"{name} must be a {kind.__name__} or a mapping with keys {', '.join(keys)} (got {value!r})")
 

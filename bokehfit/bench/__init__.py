@@ -35,11 +35,11 @@ __all__ = ["SCHEMA_VERSION", "run_bench"]
 SCHEMA_VERSION = 1
 
 
-def _device() -> dict:
+def _device(adapter=None) -> dict:
     from bokehfit.gpu import get_gpu
     from bokehfit.kernels.raster import gl_renderer
 
-    gpu = get_gpu()
+    gpu = get_gpu(adapter)
     return {"adapter": gpu.adapter_name, "backend": gpu.backend, "gl_renderer": gl_renderer()}
 
 
@@ -49,6 +49,7 @@ def run_bench(
     progress: Callable[[int, int, str], None] | None = None,
     command_line: str | None = None,
     max_point_s: float | None = None,
+    adapter=None,
 ) -> dict:
     """Run parts (a), (b) and (c) and return every figure as a JSON-ready dict.
 
@@ -63,6 +64,8 @@ def run_bench(
     max_point_s : float, optional
         Cut-off of one kernel's predicted render time (default
         :data:`bokehfit.bench.kernels.MAX_POINT_S`).
+    adapter : bokehfit.gpu.AdapterChoice, optional
+        The WebGPU adapter of the GPU kernels and of compare (the best one found by default).
 
     Returns
     -------
@@ -79,7 +82,7 @@ def run_bench(
     from bokehfit.bench import kernels as kernel_part
 
     started = time.perf_counter()
-    shapes = kernel_part.SHAPES
+    shapes = kernel_part.BENCH_APERTURES
     diameters = kernel_part.QUICK_DIAMETERS_PX if quick else kernel_part.DIAMETERS_PX
     samples = kernel_part.QUICK_SAMPLES if quick else kernel_part.SAMPLES
     cut_off = kernel_part.MAX_POINT_S if max_point_s is None else max_point_s
@@ -93,16 +96,16 @@ def run_bench(
         if progress is not None:
             progress(min(done, total), total, what)
 
-    device = _device()
+    device = _device(adapter)
     runtime = {}
     clock = time.perf_counter()
-    kernels = kernel_part.kernel_sweep(shapes, diameters, samples, max_point_s=cut_off, progress=step)
+    kernels = kernel_part.kernel_sweep(shapes, diameters, samples, max_point_s=cut_off, progress=step, adapter=adapter)
     runtime["kernel"] = time.perf_counter() - clock
     clock = time.perf_counter()
     fits = fit_part.budget_sweep(quick, progress=step)
     runtime["fit"] = time.perf_counter() - clock
     clock = time.perf_counter()
-    compared = compare_part.compare_timing(quick, progress=step)
+    compared = compare_part.compare_timing(quick, progress=step, adapter=adapter)
     runtime["compare"] = time.perf_counter() - clock
     runtime["total"] = time.perf_counter() - started
     return {

@@ -125,20 +125,23 @@ def cached_photo(spec: PhotoSpec) -> tuple[Path, float | None]:
 
 
 def _cold_child() -> None:
-    """Runs in a fresh process: ``argv[1]`` the photo, ``argv[2]`` the geometry; one JSON line out."""
+    """Runs in a fresh process: ``argv[1]`` the photo, ``argv[2]`` the geometry,
+    ``argv[3]`` the adapter choice's (name, backend); one JSON line out."""
     start = time.perf_counter()
     from bokehfit.compare import compare_photo
+    from bokehfit.gpu import AdapterChoice
 
     imported = time.perf_counter() - start
-    comparison = compare_photo(sys.argv[1], **json.loads(sys.argv[2]))
+    comparison = compare_photo(sys.argv[1], **json.loads(sys.argv[2]), adapter=AdapterChoice(*json.loads(sys.argv[3])))
     print(json.dumps({"import_s": imported, "timing_s": comparison.timing_s, "process_s": time.perf_counter() - start}))
 
 
-def cold_compare(path: Path) -> dict:
-    """The first compare_photo call of a fresh Python process on ``path``."""
+def cold_compare(path: Path, adapter=None) -> dict:
+    """The first compare_photo call of a fresh Python process on ``path``, on ``adapter``."""
     code = "from bokehfit.bench.compare import _cold_child; _cold_child()"
+    choice = json.dumps([adapter.name, adapter.backend] if adapter is not None else ["", ""])
     start = time.perf_counter()
-    done = subprocess.run([sys.executable, "-c", code, str(path), json.dumps(GEOMETRY)],
+    done = subprocess.run([sys.executable, "-c", code, str(path), json.dumps(GEOMETRY), choice],
                           capture_output=True, text=True, timeout=1800)
     wall = time.perf_counter() - start
     if done.returncode != 0:
@@ -153,8 +156,10 @@ def compare_steps() -> int:
     return 4
 
 
-def compare_timing(quick: bool = False, progress: Callable[[str], None] | None = None) -> dict:
+def compare_timing(quick: bool = False, progress: Callable[[str], None] | None = None, adapter=None) -> dict:
     """Time ``compare`` on the big photo (quick: the 4-MP one): cold, then warm by stage.
+
+    ``adapter`` (a :class:`bokehfit.gpu.AdapterChoice`) chooses the GPU of the kernel.
 
     Returns a dict with ``megapixels``, ``load_s``, ``detect_s``, ``fit_s``, ``render_s``,
     ``metrics_s``, ``total_s`` (the warm call), ``cold_total_s``, and beside them the
@@ -167,11 +172,11 @@ def compare_timing(quick: bool = False, progress: Callable[[str], None] | None =
     path, made_s = cached_photo(spec)
     warmup_path, _ = cached_photo(WARMUP)
     notify(f"compare: {spec.megapixels:.0f}-MP photo ready")
-    cold = cold_compare(path)
+    cold = cold_compare(path, adapter)
     notify("compare: cold call (fresh process)")
-    warmup = compare_photo(warmup_path, **GEOMETRY)
+    warmup = compare_photo(warmup_path, **GEOMETRY, adapter=adapter)
     notify("compare: warm-up call")
-    comparison = compare_photo(path, **GEOMETRY)
+    comparison = compare_photo(path, **GEOMETRY, adapter=adapter)
     notify("compare: warm call")
     fit = comparison.fit
     result = {"megapixels": round(spec.megapixels, 3)}

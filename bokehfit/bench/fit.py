@@ -7,9 +7,9 @@ log-uniform in ``FIT_DIAMETERS``) and one random angle, brightness
 ``FIT_BRIGHTNESS`` (so the discs' SNR differs), noise σ = ``FIT_NOISE``, through
 a quality-``FIT_QUALITY`` JPEG and :func:`bokehfit.io.load_photo` (fixed seeds).
 Discs are found once per photo. The budget knob is
-:data:`bokehfit.fit.MAX_FIT_DISCS` (the most discs fitted): for each value of
-``BUDGETS`` the module constant is replaced for the call and
-:func:`bokehfit.fit.fit_aperture` runs over all families on every photo.
+``FitOptions.max_discs`` (the most discs fitted): for each value of
+``BUDGETS``, :func:`bokehfit.fit.fit_aperture` runs over all families on every
+photo with ``options=FitOptions(max_discs=budget)``.
 
 Per budget: ``budget_s``, the mean wall time of one ``fit_aperture`` call
 per photo; ``shape_accuracy``, the share of photos whose
@@ -21,7 +21,6 @@ largest) |fitted − true| / true of the aperture's equal-area diameter
 
 from __future__ import annotations
 
-import contextlib
 import math
 import tempfile
 import time
@@ -65,7 +64,10 @@ CELL_MARGIN_PX = 12
 
 
 def family_name(shape: str, blades: int | None) -> str:
-    return f"ngon({blades})" if shape == "ngon" else shape
+    """The fit's name of a shape: ``hexagon``, ``ngon(9)`` (:attr:`bokehfit.apertures.Aperture.label`)."""
+    from bokehfit.apertures import make_aperture
+
+    return make_aperture(shape, blades=blades).label
 
 
 def grid_layout(shape, blades, aspect, angle, diameters, rng, brightness=(0.3, 0.9)):
@@ -101,12 +103,13 @@ def write_jpeg(path: Path, linear: np.ndarray, quality: int) -> None:
 
 def fit_photo(shape: str, blades: int | None, replicate: int, index: int, folder: Path) -> dict:
     """One photo of the set (seeded by replicate and index), written as JPEG, loaded and searched."""
+    from bokehfit.apertures import make_aperture
     from bokehfit.discs import find_discs
     from bokehfit.io import load_photo
     from bokehfit.synthetic import render_discs
 
     rng = np.random.default_rng(1000 * replicate + index)
-    aspect = SLIT_ASPECT if shape == "slit" else None
+    aspect = SLIT_ASPECT if "aspect" in make_aperture(shape, blades=blades).parameters else None
     angle = float(rng.uniform(0.0, 360.0))
     diameter = float(np.exp(rng.uniform(*np.log(FIT_DIAMETERS))))
     truth, width, height = grid_layout(shape, blades, aspect, angle, [diameter] * DISCS_PER_PHOTO, rng, FIT_BRIGHTNESS)
@@ -139,24 +142,11 @@ def score(fit, photo) -> dict:
 
     if not fit:
         return dict(correct=False, angle_error=None, diameter_error=None)
-    correct = fit.family.name == photo["name"]
+    correct = fit.aperture.is_named(photo["name"])
     angle = None
-    if correct and fit.aperture.symmetry_deg is not None:
+    if correct and fit.aperture.has_angle:
         angle = angle_error(fit.aperture.angle_deg, photo["angle"], fit.aperture.symmetry_deg)
     return dict(correct=correct, angle_error=angle, diameter_error=abs(fit.diameter_px - photo["diameter"]) / photo["diameter"])
-
-
-@contextlib.contextmanager
-def max_fit_discs(budget: int):
-    """Replace :data:`bokehfit.fit.MAX_FIT_DISCS` for the duration of the block."""
-    import bokehfit.fit as fitting
-
-    original = fitting.MAX_FIT_DISCS
-    fitting.MAX_FIT_DISCS = budget
-    try:
-        yield
-    finally:
-        fitting.MAX_FIT_DISCS = original
 
 
 def fit_steps(quick: bool) -> int:
@@ -191,16 +181,16 @@ def budget_sweep(quick: bool = False, progress: Callable[[str], None] | None = N
     rows, misses = [], {}
     for budget in budgets:
         results, times = [], []
-        with max_fit_discs(budget):
-            for photo in photos:
-                start = time.perf_counter()
-                fit = fitting.fit_aperture(photo["luminance"], photo["discs"])
-                times.append(time.perf_counter() - start)
-                result = score(fit, photo)
-                results.append(result)
-                if not result["correct"]:
-                    misses.setdefault(str(budget), []).append(f"{photo['name']}→{fit.family.name if fit else 'none'}")
-                notify(f"fit {photo['name']} at MAX_FIT_DISCS={budget}")
+        options = fitting.FitOptions(max_discs=budget)
+        for photo in photos:
+            start = time.perf_counter()
+            fit = fitting.fit_aperture(photo["luminance"], photo["discs"], options=options)
+            times.append(time.perf_counter() - start)
+            result = score(fit, photo)
+            results.append(result)
+            if not result["correct"]:
+                misses.setdefault(str(budget), []).append(f"{photo['name']}→{fit.family.name if fit else 'none'}")
+            notify(f"fit {photo['name']} at max_discs={budget}")
         angle, angle_max = _median_max([r["angle_error"] for r in results if r["angle_error"] is not None])
         diameter, diameter_max = _median_max([r["diameter_error"] for r in results if r["diameter_error"] is not None])
         correct = sum(r["correct"] for r in results)

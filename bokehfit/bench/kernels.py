@@ -19,6 +19,14 @@ is a check of ``exact`` as well as the reference for the sampling methods.
 width being twice the shape's reach (its farthest vertex), so no light is
 clipped.
 
+**Real-lens features.** Besides the plain shapes, :data:`FEATURE_CASES`
+renders one aperture per feature of design.md §3b (rounded 9 blades at
+roundness 0.5, squeezed, vignetted at a field position, rim, chromatic); the
+``shape`` column holds the case's name. Their reference is ``exact`` itself
+on the ``REFINE``× grid, binned (for ``rim`` that is the tabulated kernel,
+whose own stated bound is in ``notes``); a chromatic kernel's L1 is the mean
+over its red, green and blue channels.
+
 **Timing.** ``time_s`` is :attr:`bokehfit.kernels.Kernel.time_s` (upload,
 render and read-back; the one-time start-up is in ``setup_s`` and is not
 counted). Every method renders one small kernel first, so shader compilation
@@ -59,7 +67,11 @@ __all__ = [
     "SHAPES",
     "VARIANTS",
     "Variant",
+    "BENCH_APERTURES",
+    "FEATURE_CASES",
+    "bench_aperture",
     "convergence_rate",
+    "kernel_l1",
     "frame_size",
     "kernel_steps",
     "kernel_sweep",
@@ -86,6 +98,16 @@ class Variant:
 #: What is measured: ``raster`` is always stratified inside each pixel, ``exact`` draws no samples.
 VARIANTS = (Variant("exact", None), Variant("mc", "independent"), Variant("mc", "stratified"), Variant("raster", None))
 SHAPES = ("circle", "hexagon", "star")
+#: One aperture per §3b feature: name → (make_aperture keywords, field position or None).
+FEATURE_CASES = {
+    "rounded": (dict(shape="ngon", blades=9, roundness=0.5), None),
+    "squeezed": (dict(shape="hexagon", squeeze=1.6), None),
+    "vignetted": (dict(shape="hexagon", vignetting={"radius": 1.1, "shift": 1.0}), (0.7, 0.4)),
+    "rim": (dict(shape="hexagon", rim=0.6), None),
+    "chromatic": (dict(shape="hexagon", chromatic={"red": 0.05, "blue": -0.04}), None),
+}
+#: Everything ``bokehfit bench`` renders: the plain shapes, then the feature cases.
+BENCH_APERTURES = SHAPES + tuple(FEATURE_CASES)
 DIAMETERS_PX = (16.0, 64.0, 256.0)
 QUICK_DIAMETERS_PX = (64.0,)
 #: Requested samples per kernel, a decade apart (the methods round up: ``mc`` stratified to m², ``raster`` to whole passes).
@@ -109,23 +131,45 @@ MAX_POINT_S = 10.0
 WARMUP_SAMPLES = 1000
 
 
-def frame_size(shape: str, diameter_px: float, angle_deg: float = ANGLE_DEG) -> int:
-    """Side of the square frame that holds the disc with room to spare (see the module notes)."""
+def bench_aperture(name: str, angle_deg: float = ANGLE_DEG):
+    """(aperture, field position or None) of a plain shape or a :data:`FEATURE_CASES` name."""
     from bokehfit.apertures import make_aperture
 
-    reach = make_aperture(shape, angle_deg).extent() * diameter_px * math.sqrt(math.pi) / 2.0
+    if name not in FEATURE_CASES:
+        return make_aperture(name, angle_deg), None
+    params, field_position = FEATURE_CASES[name]
+    params = dict(params)
+    return make_aperture(params.pop("shape"), angle_deg, **params), field_position
+
+
+def frame_size(shape: str, diameter_px: float, angle_deg: float = ANGLE_DEG) -> int:
+    """Side of the square frame that holds the disc with room to spare (see the module notes)."""
+    aperture, _ = bench_aperture(shape, angle_deg)
+    largest = 1.0 if aperture.chromatic is None else 1.0 + max(0.0, aperture.chromatic.red, aperture.chromatic.blue)
+    reach = aperture.extent() * largest * diameter_px * math.sqrt(math.pi) / 2.0
     return math.ceil(FRAME_FACTOR * 2.0 * reach) + 2 * FRAME_MARGIN_PX
 
 
 def reference_kernel(shape: str, angle_deg: float, diameter_px: float, size: int) -> np.ndarray:
-    """Exact kernel in float64 from a ``REFINE``× finer grid, binned; sums to 1."""
-    from bokehfit.apertures import make_aperture
+    """Exact kernel in float64 from a ``REFINE``× finer grid, binned; sums to 1 (each channel)."""
+    from bokehfit.kernels import compute_kernel
     from bokehfit.kernels.exact import coverage
 
-    scale = diameter_px * math.sqrt(math.pi) / 2.0  # equal-area convention, as compute_kernel
-    fine = coverage(make_aperture(shape, angle_deg), REFINE * scale, REFINE * size)
-    binned = fine.reshape(size, REFINE, size, REFINE).sum(axis=(1, 3))
-    return binned / binned.sum()
+    aperture, field_position = bench_aperture(shape, angle_deg)
+    if shape in FEATURE_CASES:
+        fine = compute_kernel(aperture, diameter_px=REFINE * diameter_px, size=REFINE * size,
+                              field_position=field_position).image.astype(np.float64)
+    else:
+        scale = diameter_px * math.sqrt(math.pi) / 2.0  # equal-area convention, as compute_kernel
+        fine = coverage(aperture, REFINE * scale, REFINE * size)
+    binned = fine.reshape(size, REFINE, size, REFINE, *fine.shape[2:]).sum(axis=(1, 3))
+    return binned / binned.sum(axis=(0, 1))
+
+
+def kernel_l1(image: np.ndarray, reference: np.ndarray) -> float:
+    """L1 distance of a kernel to its reference; the mean over the channels of a colour kernel."""
+    channels = image.shape[2] if image.ndim == 3 else 1
+    return float(np.abs(image.astype(np.float64) - reference).sum()) / channels
 
 
 def convergence_rate(samples, l1, min_samples: float = 0.0) -> tuple[float | None, int]:
@@ -146,14 +190,15 @@ def kernel_steps(shapes, diameters, samples) -> int:
     return len(shapes) * len(diameters) * per_frame
 
 
-def _measure(shape, angle, diameter, size, variant: Variant, samples, repeats):
+def _measure(shape, angle, diameter, size, variant: Variant, samples, repeats, adapter=None):
     from bokehfit.kernels import compute_kernel
 
+    aperture, field_position = bench_aperture(shape, angle)
     best_kernel, best = None, math.inf
     for _ in range(max(1, repeats)):
         kernel = compute_kernel(
-            shape, angle, diameter, size, method=variant.method, samples=samples,
-            sampling=variant.sampling or "stratified", seed=SEED,
+            aperture, diameter_px=diameter, size=size, method=variant.method, samples=samples,
+            sampling=variant.sampling or "stratified", seed=SEED, adapter=adapter, field_position=field_position,
         )
         if kernel.time_s < best:
             best_kernel, best = kernel, kernel.time_s
@@ -172,6 +217,7 @@ def kernel_sweep(
     repeats: int = REPEATS,
     max_point_s: float = MAX_POINT_S,
     progress: Callable[[str], None] | None = None,
+    adapter=None,
 ) -> dict:
     """Render every variant × shape × diameter × sample count; score, time and fit the rates.
 
@@ -187,12 +233,14 @@ def kernel_sweep(
         Skip a count whose predicted time exceeds this (``math.inf``: never).
     progress : callable, optional
         Called with a short description after each kernel.
+    adapter : bokehfit.gpu.AdapterChoice, optional
+        The WebGPU adapter of ``mc`` (the best one found by default).
 
     Returns
     -------
     dict
         ``rows`` (method, sampling, shape, diameter_px, size, requested_samples, samples,
-        time_s, l1), ``rates`` (method, sampling, shape, diameter_px, rate, points,
+        time_s, l1, error_bound: the stated bound of a tabulated exact kernel, else None), ``rates`` (method, sampling, shape, diameter_px, rate, points,
         min_samples), ``skipped`` (the points left out, with predicted_s), ``devices``
         (by method) and ``notes`` (one line each, for people).
     """
@@ -209,7 +257,8 @@ def kernel_sweep(
             area_px = math.pi * diameter * diameter / 4.0
             for variant in VARIANTS:
                 if variant.method not in warmed:
-                    compute_kernel(shape, angle_deg, diameter, frame, method=variant.method, samples=WARMUP_SAMPLES)
+                    compute_kernel(bench_aperture(shape, angle_deg)[0], diameter_px=diameter, size=frame,
+                                   method=variant.method, samples=WARMUP_SAMPLES, adapter=adapter)
                     warmed.add(variant.method)
                 series = []
                 previous = None  # (requested, drawn, time)
@@ -222,16 +271,20 @@ def kernel_sweep(
                                             predicted_s=round(predicted, 3)))
                         notify(what + " skipped")
                         continue
-                    kernel, seconds = _measure(shape, angle_deg, diameter, frame, variant, requested, repeats)
+                    kernel, seconds = _measure(shape, angle_deg, diameter, frame, variant, requested, repeats, adapter)
                     devices.setdefault(variant.method, kernel.device)
                     notify(what)
                     if previous is not None and kernel.samples == previous[1]:
                         notes.append(f"{variant.label}, {shape} {diameter:g} px: {requested:.0e} samples round to "
                                      f"the {kernel.samples} of the previous count; measured once")
                         continue
-                    l1 = float(np.abs(kernel.image.astype(np.float64) - reference).sum())
+                    l1 = kernel_l1(kernel.image, reference)
+                    if kernel.error_bound is not None and variant.method == "exact" and shape in FEATURE_CASES:
+                        notes.append(f"{shape} {diameter:g} px: exact is tabulated (rim), stated L1 bound "
+                                     f"{kernel.error_bound:.2g}; measured {l1:.2g} against the {REFINE}× grid")
                     row = dict(method=variant.method, sampling=variant.sampling, shape=shape, diameter_px=diameter,
-                               size=frame, requested_samples=requested, samples=kernel.samples, time_s=seconds, l1=l1)
+                               size=frame, requested_samples=requested, samples=kernel.samples, time_s=seconds, l1=l1,
+                               error_bound=kernel.error_bound)
                     rows.append(row)
                     series.append(row)
                     if requested is not None:

@@ -84,7 +84,7 @@ def kernel_table(result: dict) -> tuple[list[str], list[list[str]]]:
 
 
 def fit_table(result: dict) -> tuple[list[str], list[list[str]]]:
-    header = ["MAX_FIT_DISCS", "budget_s (mean fit s/photo)", "max s", "shape right", "angle err ° median", "max",
+    header = ["max_discs", "budget_s (mean fit s/photo)", "max s", "shape right", "angle err ° median", "max",
               "diameter err median", "max"]
     rows = [[str(r["max_fit_discs"]), f"{r['budget_s']:.3f}", f"{r['fit_max_s']:.3f}",
              f"{r['correct']}/{r['photos']} ({100 * r['shape_accuracy']:.0f} %)",
@@ -142,14 +142,14 @@ def format_tables(result: dict) -> str:
     out += [f"note: {note}" for note in result["notes"]]
     out += [
         "",
-        "## (b) Fit error against fit time (budget knob: bokehfit.fit.MAX_FIT_DISCS)",
+        "## (b) Fit error against fit time (budget knob: FitOptions.max_discs)",
         "",
         result["fit_set"],
         "",
         markdown_table(*fit_table(result)),
     ]
     for budget, names in result["fit_misses"].items():
-        out.append(f"wrong shape at MAX_FIT_DISCS={budget}: {', '.join(names)}")
+        out.append(f"wrong shape at max_discs={budget}: {', '.join(names)}")
     out += [
         "",
         f"## (c) compare on a {c['megapixels']:.1f}-MP JPEG ({c['width']}×{c['height']}, {c['discs_drawn']} {c['truth']} discs), seconds",
@@ -251,7 +251,7 @@ def _fit_figure(result: dict):
         ax.set_title(title, fontsize=10)
         ax.set_xlabel("fit time per photo, budget_s (s)")
         ax.grid(True, which="major", alpha=0.3)
-    figure.suptitle("Fit error against fit time (point labels: MAX_FIT_DISCS)", fontsize=11)
+    figure.suptitle("Fit error against fit time (point labels: FitOptions.max_discs)", fontsize=11)
     return figure
 
 
@@ -318,7 +318,7 @@ def build_html(result: dict) -> str:
     parts += [f"<p class='note'>{html.escape(line)}</p>" for line in [_cut_off_line(result), *result["notes"]]]
     parts += [
         "<h2>(b) Fit error against fit time</h2>",
-        f"<p>{html.escape(result['fit_set'])}. The budget knob is <code>bokehfit.fit.MAX_FIT_DISCS</code>; "
+        f"<p>{html.escape(result['fit_set'])}. The budget knob is <code>FitOptions.max_discs</code>; "
         "budget_s is the mean measured fit time per photo.</p>",
         _img(_fit_figure(result), "fit error against fit time"),
         _table(*fit_table(result)),

@@ -1,4 +1,11 @@
-"""``bokehfit compare``: fit the aperture behind a photo's bokeh and report how well it matches."""
+"""``bokehfit compare``: fit the aperture behind a photo's bokeh and report how well it matches.
+
+Every outcome (fitted, unsure, no_fit, no_discs) writes its JSON and its HTML
+report where outputs were asked for: ``--json OUT.json`` puts ``OUT.html``
+beside it; ``--out-dir DIR`` alone writes ``DIR/<photo stem>.json`` and
+``DIR/<photo stem>.html``. With neither, nothing is written and the summary
+says so. Exit code 0 for fitted and unsure, 1 for no_fit and no_discs.
+"""
 
 from __future__ import annotations
 
@@ -8,11 +15,13 @@ import sys
 from pathlib import Path
 
 from bokehfit.compare import Comparison, compare_photo
+from bokehfit.discs import DEFAULT_MAX_DIAMETER_PX, DEFAULT_MIN_DIAMETER_PX
 from bokehfit.discs.measure import RESOLVABLE_PX
 from bokehfit.errors import InputError, NoResultError, check_positive
 from bokehfit.fit import FOCUS_SIDES
 from bokehfit.optics import LENS_MODELS, SIZE_CONVENTIONS
 from bokehfit.outputs import check_output_path, write_bytes_atomic, write_json
+from bokehfit.validate import arg_type
 
 __all__ = ["add_parser", "run", "summary"]
 
@@ -31,49 +40,35 @@ def add_parser(subparsers) -> None:
         "kernel on the GPU and report how well shape and kernel match.",
     )
     parser.add_argument("photo", help="JPEG, PNG, TIFF or camera raw file")
-    parser.add_argument("--json", metavar="OUT.json", help="write the result as JSON (schema_version 1); creates its folder")
-    parser.add_argument("--out-dir", metavar="DIR", help="folder for report.html, created if missing (default: the JSON's folder)")
+    parser.add_argument("--json", metavar="OUT.json",
+                        help="write the result as JSON (schema_version 2) on every outcome, and the report beside it "
+                             "as OUT.html; creates its folder")
+    parser.add_argument("--out-dir", metavar="DIR",
+                        help="folder for the report (default: the JSON's folder), created if missing; without --json "
+                             "it gets PHOTO_STEM.json and PHOTO_STEM.html. With neither option nothing is written")
     parser.add_argument("--no-html", action="store_true", help="write no HTML report")
     parser.add_argument("--shapes", help="comma-separated shapes to try (default: all), e.g. circle,hexagon,ngon(9)")
-    parser.add_argument("--focus-side", choices=FOCUS_SIDES, default="unknown", help="lights behind (far) or before (near) the focus plane")
-    parser.add_argument("--lens-model", choices=LENS_MODELS, default="thin", help="thin (photos) or pinhole (renderers)")
-    parser.add_argument("--size-convention", choices=SIZE_CONVENTIONS, default="equal-area")
-    parser.add_argument("--focal-length-mm", type=float)
-    parser.add_argument("--sensor-width-mm", type=float, help="the sensor's long side")
-    parser.add_argument("--focus-distance-m", type=float)
-    parser.add_argument("--light-distance-m", type=_distance, default=math.inf, help="a number or inf (default)")
-    parser.add_argument("--min-diameter-px", type=float, default=RESOLVABLE_PX,
-                        help=f"smallest disc sought (default {RESOLVABLE_PX:g}: smaller ones cannot show a shape)")
-    parser.add_argument("--max-diameter-px", type=float, default=500.0)
+    parser.add_argument("--focus-side", choices=FOCUS_SIDES, default="unknown", help="lights behind (far) or before (near) the focus plane; unknown reports both readings of odd shapes (default: %(default)s)")
+    parser.add_argument("--lens-model", choices=LENS_MODELS, default="thin", help="thin (photos) or pinhole (renderers with a pinhole camera and a shaped aperture) (default: %(default)s)")
+    parser.add_argument("--size-convention", choices=SIZE_CONVENTIONS, default="equal-area",
+                        help="what f/N fixes: the area of a circle of diameter f/N (equal-area) or the diameter of the "
+                             "shape's circumscribed circle (circumscribed, as Blender Cycles) (default: %(default)s)")
+    parser.add_argument("--focal-length-mm", type=arg_type("focal_length_mm", "--focal-length-mm"), help="the lens's focal length (default: from EXIF)")
+    parser.add_argument("--sensor-width-mm", type=arg_type("sensor_width_mm", "--sensor-width-mm"), help="the sensor's long side (default: from EXIF)")
+    parser.add_argument("--focus-distance-m", type=arg_type("focus_distance_m", "--focus-distance-m"), help="focus distance (default: from EXIF)")
+    parser.add_argument("--light-distance-m", type=arg_type("light_distance_m", "--light-distance-m"), default=math.inf, help="the lights' distance, a number or inf; without it the f-stop printed is an upper bound "
+                        "(its value for lights at infinity) (default: %(default)s)")
+    parser.add_argument("--min-diameter-px", type=float, default=DEFAULT_MIN_DIAMETER_PX,
+                        help=f"smallest disc sought (default {DEFAULT_MIN_DIAMETER_PX:g}, as for `bokehfit discs`; "
+                             f"discs under {RESOLVABLE_PX:g} px are reported but cannot show a shape)")
+    parser.add_argument("--max-diameter-px", type=float, default=DEFAULT_MAX_DIAMETER_PX,
+                        help="largest disc sought, pixels, or inf for no limit (default %(default)g, as for `bokehfit discs`)")
     parser.set_defaults(run=run)
 
 
 def summary(comparison: Comparison) -> str:
-    """The result in a few lines for the terminal."""
-    fit, search = comparison.fit, comparison.search
-    lines = [f"{comparison.photo.path.name}: {comparison.photo.width}×{comparison.photo.height}, "
-             f"{len(search.discs)} discs ({sum(d.usable for d in search.discs)} clean enough to fit)"]
-    if not fit:
-        return "\n".join(lines + [f"no aperture fitted: {fit.message}"])
-    aperture = comparison.aperture_json()
-    angle = "" if aperture["angle_deg"] is None else f", angle {aperture['angle_deg']:.2f}° ± {aperture['angle_uncertainty_deg']:.2f}°"
-    lines.append(f"aperture: {fit.aperture.describe()}{angle}, disc {aperture['diameter_px']:.2f} px")
-    if comparison.doubts:
-        lines.append("unsure: " + "; ".join(comparison.doubts))
-    if aperture["fstop"] is None:
-        lines.append(f"f-stop: unknown: {aperture['fstop_reason']}")
-    else:
-        lines.append(f"f-stop: f/{aperture['fstop']:.2f} ± {aperture['fstop_uncertainty']:.2f} "
-                     f"({aperture['size_convention']}, {aperture['lens_model']} lens)")
-    if aperture["angle_note"]:
-        lines.append(aperture["angle_note"])
-    ranked = ", ".join(f"{c['name']} (ΔBIC {c['delta_bic']:.0f})" for c in aperture["candidates"][1:])
-    lines.append(f"runners-up: {ranked or 'none'}")
-    lines.append("metrics (discs vs kernel, median): " + ", ".join(
-        f"{k} {v:.4f}" for k, v in comparison.metrics.items() if v is not None))
-    lines.append("time: " + ", ".join(f"{k} {v:.2f} s" for k, v in comparison.timing_s.items())
-                 + f"; kernel on {comparison.device.get('adapter')}")
-    return "\n".join(lines)
+    """The result in a few lines for the terminal (:meth:`Comparison.summary`)."""
+    return comparison.summary()
 
 
 class _Progress:
@@ -112,19 +107,28 @@ def _make_folder(folder: Path) -> None:
         raise InputError(f"cannot create the output folder {str(folder)!r}: {error.strerror}") from None
 
 
-def run(args: argparse.Namespace) -> Comparison:
-    if not Path(args.photo).is_file():
-        raise InputError(f"{args.photo} does not exist or is not a file")
-    json_path = None
+def _output_paths(args: argparse.Namespace) -> tuple[Path | None, Path | None]:
+    """The JSON and the HTML report to write (None where not asked for), checked before the work."""
+    json_path = html_path = None
+    stem = Path(args.photo).stem
     if args.json:
         _make_folder(Path(args.json).parent)
         json_path = check_output_path(args.json, (".json",), inputs=[args.photo])
-    html_path = None
-    if not args.no_html:
-        folder = Path(args.out_dir) if args.out_dir else (json_path.parent if json_path else None)
-        if folder is not None:
-            _make_folder(folder)
-            html_path = check_output_path(folder / "report.html", (".html",), inputs=[args.photo])
+        stem = json_path.stem
+    elif args.out_dir:
+        _make_folder(Path(args.out_dir))
+        json_path = check_output_path(Path(args.out_dir) / f"{stem}.json", (".json",), inputs=[args.photo])
+    if not args.no_html and json_path is not None:
+        folder = Path(args.out_dir) if args.out_dir else json_path.parent
+        _make_folder(folder)
+        html_path = check_output_path(folder / f"{stem}.html", (".html",), inputs=[args.photo])
+    return json_path, html_path
+
+
+def run(args: argparse.Namespace) -> Comparison:
+    if not Path(args.photo).is_file():
+        raise InputError(f"{args.photo} does not exist or is not a file")
+    json_path, html_path = _output_paths(args)
     shapes = [s.strip() for s in args.shapes.split(",") if s.strip()] if args.shapes else None
     progress = _Progress()
     try:
@@ -141,17 +145,12 @@ def run(args: argparse.Namespace) -> Comparison:
             min_diameter_px=args.min_diameter_px,
             max_diameter_px=args.max_diameter_px,
             progress=progress,
+            adapter=args.adapter,
         )
     finally:
         progress.close()
-    command_line = " ".join(["bokehfit", *sys.argv[1:]])
+    command_line = args.command_line
     print(summary(comparison))
-    if not comparison.search:
-        raise NoResultError(f"no bokeh disc found in {comparison.photo.path.name}: {comparison.search.reason}")
-    if not comparison.fit:
-        raise NoResultError(comparison.fit.message)
-    if comparison.rejection:
-        raise NoResultError(comparison.rejection)
     if json_path:
         write_json(json_path, comparison.to_json(command_line))
         print(f"wrote {json_path}")
@@ -160,4 +159,10 @@ def run(args: argparse.Namespace) -> Comparison:
 
         write_bytes_atomic(html_path, build_html(comparison, command_line).encode("utf-8"))
         print(f"wrote {html_path}")
+    if json_path is None:
+        print("no files written (give --json OUT.json or --out-dir DIR for the JSON and the HTML report)")
+    if comparison.status == "no_fit":
+        raise NoResultError(f"no acceptable fit: {comparison.reason}")
+    if comparison.status == "no_discs":
+        raise NoResultError(comparison.reason)
     return comparison

@@ -26,11 +26,25 @@ def add_parser(subparsers) -> None:
         description="Find the bokeh discs of a photo: centre, equal-area diameter, sub-pixel outline and flags.",
     )
     parser.add_argument("photo", help="JPEG, PNG, TIFF or camera raw file")
-    parser.add_argument("--json", metavar="OUT.json", help="write the discs as JSON")
+    parser.add_argument("--json", metavar="OUT.json", help="write the discs as JSON (schema_version 1)")
     parser.add_argument("--overlay", metavar="OUT.png", help="write the photo with the outlines drawn on it")
-    parser.add_argument("--min-diameter-px", type=float, default=DEFAULT_MIN_DIAMETER_PX)
-    parser.add_argument("--max-diameter-px", type=float, default=DEFAULT_MAX_DIAMETER_PX)
-    parser.add_argument("--max-discs", type=int, default=None, help="keep the largest N discs")
+    parser.add_argument(
+        "--min-diameter-px",
+        type=float,
+        default=DEFAULT_MIN_DIAMETER_PX,
+        metavar="PX",
+        help="smallest equal-area disc diameter to look for, pixels (default: %(default)g)",
+    )
+    parser.add_argument(
+        "--max-diameter-px",
+        type=float,
+        default=DEFAULT_MAX_DIAMETER_PX,
+        metavar="PX",
+        help="largest equal-area disc diameter to look for, pixels (default: %(default)g)",
+    )
+    parser.add_argument(
+        "--max-discs", type=int, default=None, metavar="N", help="keep the largest N discs (default: all of them)"
+    )
     parser.set_defaults(run=run)
 
 
@@ -43,7 +57,7 @@ def disc_table(search: DiscSearch, rows: int = TABLE_ROWS) -> str:
             flags.append("small")
         lines.append(
             f"{disc.index:>4} {disc.center_xy[0]:>8.1f} {disc.center_xy[1]:>8.1f} {disc.diameter_px:>8.2f} "
-            f"{disc.snr:>6.1f}  {', '.join(flags) or 'used'}"
+            f"{disc.snr:>6.1f}  {', '.join(flags) or 'usable'}"
         )
     if len(search.discs) > rows:
         lines.append(f"     … and {len(search.discs) - rows} more (all are in the JSON)")
@@ -70,13 +84,15 @@ def run(args: argparse.Namespace) -> DiscSearch:
         progress=progress,
     )
     print(f"{photo.path.name}: {photo.width}×{photo.height}, {photo.colour_space}; {photo.linearisation}")
+    for note in (*photo.notes, *search.notes):
+        print(f"note: {note}")
     if "json" in outputs:
         write_json(
             outputs["json"],
             {
                 "schema_version": SCHEMA_VERSION,
                 "bokehfit_version": __version__,
-                "command_line": " ".join(["bokehfit", *sys.argv[1:]]) if sys.argv else "bokehfit",
+                "command_line": args.command_line,
                 "input": photo.input_json(),
                 "detection": {
                     "candidates": search.candidates,

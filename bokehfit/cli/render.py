@@ -8,11 +8,13 @@ import re
 import sys
 
 from bokehfit import __version__
-from bokehfit.errors import InputError, check_finite
+from bokehfit.apertures import SHAPES
+from bokehfit.errors import InputError
 from bokehfit.outputs import check_output_path, write_json
 from bokehfit.scene import (
     FOCAL_LENGTH_MM,
     RENDER_FORMATS,
+    SCENES,
     SENSOR_WIDTH_MM,
     RenderResult,
     build_scene,
@@ -23,11 +25,18 @@ from bokehfit.scene import (
     total_work,
     write_render,
 )
+from bokehfit.scene.renderer import QUICK_WORK, estimate_render_s
+from bokehfit.cli.aperture_args import add_feature_arguments
+from bokehfit.validate import arg_type, interval, shape_arg
 
 __all__ = ["add_parser", "run", "parse_size"]
 
 #: Version of the --json layout; keys are added, never renamed, within one version.
 SCHEMA_VERSION = 1
+#: Default bound on a render's estimated time (--max-time), seconds.
+DEFAULT_MAX_TIME_S = 3600.0
+#: Renders estimated to take longer than this print the estimate before they start, seconds.
+ANNOUNCE_S = 10.0
 
 
 def parse_size(text: str) -> tuple[int, int]:
@@ -46,36 +55,57 @@ def add_parser(subparsers) -> None:
         "render",
         help="path-trace the Cornell box (or point lights) through a shaped aperture",
         description=(
-            "Render a scene with the WGSL path tracer through the thin-lens camera of design.md §4: "
-            f"a {FOCAL_LENGTH_MM:g} mm lens on a {SENSOR_WIDTH_MM:g} mm wide sensor, the aperture "
-            "the area of a circle of diameter f/N. Prints samples per second and the adapter."
+            "Render a scene with the WGSL path tracer through the renderer camera of the design conventions "
+            f"(docs/conventions.md, section 4, 'Renderer camera'): a {FOCAL_LENGTH_MM:g} mm lens on a "
+            f"{SENSOR_WIDTH_MM:g} mm wide sensor, the aperture the area of a circle of diameter f/N. "
+            "Prints samples per second and the adapter. Renders estimated to take longer than "
+            f"{ANNOUNCE_S:g} s print the estimate first; those over --max-time are refused."
         ),
     )
     parser.add_argument(
-        "--scene", default="cornell",
+        "--scene", default="cornell", metavar="|".join(SCENES),
         help="cornell: the Cornell box, path traced; points: point lights on black, each drawn by "
         "splatting aperture samples through it (default cornell)",
     )
-    parser.add_argument("--shape", default="circle", help="aperture shape (default circle)")
-    parser.add_argument("--angle", type=float, default=0.0, metavar="DEG", help="counter-clockwise rotation (default 0)")
-    parser.add_argument("--fstop", type=float, default=2.8, help="equal-area f-stop (default 2.8)")
     parser.add_argument(
-        "--focus-distance", type=float, default=None, metavar="M",
-        help="focus plane's distance along the view axis, m (default: cornell 0.7, points 0.3)",
+        "--shape", type=shape_arg("--shape"), default="circle",
+        help=f"aperture shape: {', '.join(SHAPES)} (with --blades) or ngon(N) (default circle)",
     )
-    parser.add_argument("--aspect", type=float, default=None, help="width/height of a slit (default 0.3)")
-    parser.add_argument("--blades", type=int, default=None, help="blade count of an ngon")
-    parser.add_argument("--spp", type=int, default=64, help="samples per pixel (default 64)")
-    parser.add_argument("--size", default="512x512", metavar="WxH", help="image size in pixels (default 512x512)")
-    parser.add_argument("--seed", type=int, default=0, help="random seed; the same seed gives the same image (default 0)")
+    parser.add_argument("--angle", type=arg_type("angle_deg", "--angle"), default=0.0, metavar="DEG", help="counter-clockwise rotation (default 0)")
+    parser.add_argument("--fstop", type=arg_type("fstop", "--fstop"), default=2.8, metavar="N", help=f"equal-area f-stop, {interval('fstop')} (default 2.8)")
+    parser.add_argument(
+        "--focus-distance", type=arg_type("focus_distance_m", "--focus-distance"), default=None, metavar="M",
+        help=f"focus plane's distance along the view axis, {interval('focus_distance_m')} (default: cornell 0.7, points 0.3)",
+    )
+    parser.add_argument("--aspect", type=arg_type("aspect", "--aspect"), default=None, metavar="A", help="width/height of a slit (default 0.3)")
+    parser.add_argument("--blades", type=arg_type("blades", "--blades"), default=None, metavar="N", help=f"blade count of an ngon, {interval('blades')} (default: none)")
+    add_feature_arguments(parser)
+    parser.add_argument("--spp", type=arg_type("spp", "--spp"), default=64, metavar="N", help=f"samples per pixel, {interval('spp')} (default 64)")
+    parser.add_argument("--size", default="512x512", metavar="WxH", help=f"image size in pixels, each side {interval('image_side_px')} (default 512x512)")
+    parser.add_argument("--seed", type=arg_type("seed", "--seed"), default=0, metavar="S", help="random seed; the same seed gives the same image (default 0)")
     parser.add_argument(
         "--light-depths", default=None, metavar="M,M,...",
         help="points scene: depths of the lights, m, 'inf' allowed (default 0.15,0.2,0.3,0.6,inf)",
     )
-    parser.add_argument("--exposure", type=float, default=0.0, metavar="EV", help="PNG only: scale by 2^EV before tone mapping")
-    parser.add_argument("--out", required=True, help=f"output image ({', '.join(RENDER_FORMATS)})")
-    parser.add_argument("--json", default=None, help="write timing, adapter and parameters here")
+    parser.add_argument(
+        "--exposure", type=arg_type("exposure_ev", "--exposure"), default=0.0, metavar="EV",
+        help=f"PNG only: scale by 2^EV before tone mapping, {interval('exposure_ev')} (default 0)",
+    )
+    parser.add_argument(
+        "--max-time", type=arg_type("max_time_s", "--max-time"), default=DEFAULT_MAX_TIME_S, metavar="S",
+        help=f"refuse a render estimated to take longer, seconds, or inf (default {DEFAULT_MAX_TIME_S:g})",
+    )
+    parser.add_argument("--out", required=True, help=f"output image ({', '.join(RENDER_FORMATS)}); required")
+    parser.add_argument("--json", default=None, metavar="OUT.json", help="write timing, adapter and parameters here (default: none)")
     parser.set_defaults(run=run)
+
+
+def _duration(seconds: float) -> str:
+    """``42 s``, ``3.5 min``, ``2.1 h``, ``3.2 days``."""
+    for unit, size in (("days", 86400.0), ("h", 3600.0), ("min", 60.0)):
+        if seconds >= 2 * size:
+            return f"{seconds / size:.2g} {unit}"
+    return f"{seconds:.2g} s"
 
 
 class _Progress:
@@ -100,7 +130,7 @@ class _Progress:
 def run(args: argparse.Namespace) -> RenderResult:
     out = check_output_path(args.out, RENDER_FORMATS)
     json_path = check_output_path(args.json, (".json",)) if args.json else None
-    exposure = check_finite("exposure", args.exposure)
+    exposure = args.exposure
     width, height = parse_size(args.size)
     depths = parse_depths(args.light_depths) if args.light_depths is not None else None
     scene = build_scene(args.scene, light_depths_m=depths)
@@ -111,11 +141,25 @@ def run(args: argparse.Namespace) -> RenderResult:
         focus_distance_m=scene.default_focus_m if args.focus_distance is None else args.focus_distance,
         blades=args.blades,
         aspect=args.aspect,
+        roundness=args.roundness,
+        squeeze=args.squeeze,
+        vignetting=None if args.vignetting is None else dict(zip(("radius", "shift"), args.vignetting)),
+        rim=args.rim,
+        chromatic=None if args.chromatic is None else dict(zip(("red", "blue"), args.chromatic)),
     )
     settings = make_settings(width, height, args.spp, args.seed)
-    progress = _Progress(total_work(scene, lens, settings))
+    if total_work(scene, lens, settings, args.adapter) > QUICK_WORK:
+        estimate, rate = estimate_render_s(scene, lens, settings, args.adapter)
+        if estimate > args.max_time:
+            raise InputError(
+                f"the render would take about {_duration(estimate)} ({rate / 1e6:.3g} M samples/s in a trial), "
+                f"more than --max-time {args.max_time:g} s: lower --spp or --size, or raise --max-time"
+            )
+        if estimate > ANNOUNCE_S:
+            print(f"estimated time: about {_duration(estimate)} ({rate / 1e6:.3g} M samples/s in a trial)", flush=True)
+    progress = _Progress(total_work(scene, lens, settings, args.adapter))
     try:
-        result = render_scene(scene, lens, settings, progress if progress.bar is not None else None)
+        result = render_scene(scene, lens, settings, progress if progress.bar is not None else None, adapter=args.adapter)
     finally:
         progress.close()
     if result.nonfinite_pixels:
@@ -133,7 +177,7 @@ def run(args: argparse.Namespace) -> RenderResult:
         data = dict(
             schema_version=SCHEMA_VERSION,
             bokehfit_version=__version__,
-            command_line=" ".join(["bokehfit", *sys.argv[1:]]),
+            command_line=args.command_line,
             output=str(out),
             **result.to_json(),
         )

@@ -3,17 +3,21 @@
 from __future__ import annotations
 
 import argparse
-import sys
 
 from bokehfit import __version__
-from bokehfit.apertures import Aperture, make_aperture
+from bokehfit.apertures import SHAPES, Aperture, Vignetting, make_aperture
+from bokehfit.cli.aperture_args import add_feature_arguments
+from bokehfit.validate import pair_arg
 from bokehfit.errors import InputError
 from bokehfit.metrics import METRICS, angle_error, aperture_outline, best_rotation_deg, compare_outlines
+from bokehfit.metrics.outlines import DEFAULT_POINTS, densify
 from bokehfit.outputs import check_output_path, write_json
 
 __all__ = ["add_parser", "run", "SCHEMA_VERSION"]
 
 SCHEMA_VERSION = 1
+#: Chord error of a vignetted outline's arcs before the metrics resample it (unit-area units).
+OUTLINE_CHORD_ERROR = 1e-6
 
 
 def add_parser(subparsers) -> None:
@@ -25,54 +29,104 @@ def add_parser(subparsers) -> None:
             "elliptic Fourier and Hu moment distances, and the angle error when both are the same shape."
         ),
     )
-    parser.add_argument("shape_a", metavar="SHAPE_A", help="circle, square, slit, triangle, pentagon, hexagon, star or ngon")
-    parser.add_argument("shape_b", metavar="SHAPE_B", help="as SHAPE_A")
+    parser.add_argument(
+        "shape_a", metavar="SHAPE_A", help=f"{', '.join(SHAPES)} (with --blades-a) or ngon(N), e.g. ngon(9); required"
+    )
+    parser.add_argument("shape_b", metavar="SHAPE_B", help="as SHAPE_A; required")
     for side in ("a", "b"):
         upper = side.upper()
         parser.add_argument(f"--angle-{side}", type=float, default=0.0, metavar="DEG", help=f"counter-clockwise rotation of {upper} (default 0)")
-        parser.add_argument(f"--blades-{side}", type=int, default=None, metavar="N", help=f"blade count of {upper} when it is an ngon")
+        parser.add_argument(f"--blades-{side}", type=int, default=None, metavar="N", help=f"blade count of {upper} when it is an ngon (default: none)")
         parser.add_argument(f"--aspect-{side}", type=float, default=None, metavar="A", help=f"width/height of {upper} when it is a slit (default 0.3)")
-    parser.add_argument("--json", metavar="OUT.json", help="write the metrics as JSON")
+        # Only the features that change the outline: rim and chromatic change the light, not the shape.
+        add_feature_arguments(parser, suffix=f"-{side}", whose=f" of {upper}", outline_only=True, mask=True)
+        parser.add_argument(
+            f"--field-position-{side}", type=pair_arg(f"--field-position-{side}", ("field_position", "field_position"), "X,Y"),
+            default=None, metavar="X,Y",
+            help=f"position of {upper}'s disc from the image centre, half-diagonals, y up: where --vignetting-{side} cuts it (default 0,0)",
+        )
+    parser.add_argument("--json", metavar="OUT.json", help="write the metrics as JSON (default: none)")
     parser.set_defaults(run=run)
 
 
 def _aperture(args: argparse.Namespace, side: str) -> Aperture:
+    vignetting = getattr(args, f"vignetting_{side}")
+    if getattr(args, f"field_position_{side}") is not None and vignetting is None:
+        raise InputError(f"--field-position-{side} applies only with --vignetting-{side} (got no vignetting)")
     try:
+        features = {
+            name: getattr(args, f"{name}_{side}") for name in ("roundness", "squeeze") if getattr(args, f"{name}_{side}") is not None
+        }
         return make_aperture(
             getattr(args, f"shape_{side}"),
             getattr(args, f"angle_{side}"),
             blades=getattr(args, f"blades_{side}"),
             aspect=getattr(args, f"aspect_{side}"),
+            vignetting=None if vignetting is None else Vignetting(*vignetting),
+            mask=getattr(args, f"mask_{side}"),
+            **features,
         )
     except InputError as error:
         # make_aperture's messages open with the parameter's name: give the option's.
         message = str(error)
         name = message.split(" ", 1)[0]
-        options = {"shape": f"SHAPE_{side.upper()}", "angle_deg": f"--angle-{side}", "blades": f"--blades-{side}", "aspect": f"--aspect-{side}"}
+        options = {"shape": f"SHAPE_{side.upper()}", "angle_deg": f"--angle-{side}", "blades": f"--blades-{side}", "aspect": f"--aspect-{side}",
+                   "roundness": f"--roundness-{side}", "squeeze": f"--squeeze-{side}", "mask": f"--mask-{side}"}
         if name in options:
             message = options[name] + message[len(name) :]
         raise InputError(message) from None
 
 
-def _aperture_json(aperture: Aperture) -> dict:
+def _field_position(args: argparse.Namespace, side: str):
+    """Where side's vignetting cuts it: the option's value, (0, 0) by default; None without vignetting."""
+    if getattr(args, f"vignetting_{side}") is None:
+        return None
+    return getattr(args, f"field_position_{side}") or (0.0, 0.0)
+
+
+def _outline(aperture: Aperture, field_position):
+    """The outline the metrics compare: the unit-area outline, or the vignetted one (it passes less light)."""
+    if field_position is None:
+        if len(aperture.outline().loops) != 1:  # a mask's 50 % transmission contour may fall apart
+            raise InputError(
+                f"the outline of {aperture.describe()} (its 50 % transmission contour) has {len(aperture.outline().loops)} "
+                "pieces: the metrics compare one outline"
+            )
+        return aperture_outline(aperture)
+    clipped = aperture.outline(field_position)
+    if len(clipped.loops) != 1:
+        raise InputError(
+            f"the vignetting leaves {len(clipped.loops)} pieces of {aperture.describe()} at field position "
+            f"{field_position[0]:g},{field_position[1]:g}: the metrics compare one outline"
+        )
+    return densify(clipped.polyline(OUTLINE_CHORD_ERROR), DEFAULT_POINTS)
+
+
+def _aperture_json(aperture: Aperture, field_position=None) -> dict:
+    vignetting = aperture.vignetting
     return {
         "shape": aperture.shape,
         "angle_deg": aperture.canonical_angle_deg,
         "blades": aperture.blades,
         "aspect": aperture.aspect,
         "symmetry_deg": aperture.symmetry_deg,
+        "roundness": aperture.roundness,
+        "squeeze": aperture.squeeze,
+        "vignetting": None if vignetting is None else {"radius": vignetting.radius, "shift": vignetting.shift},
+        "field_position": None if field_position is None else list(field_position),
     }
 
 
 def same_shape(a: Aperture, b: Aperture) -> bool:
     """Whether an angle error between ``a`` and ``b`` means anything: one family, one symmetry."""
-    return a.spec.family == b.spec.family and a.symmetry_deg == b.symmetry_deg
+    return a.spec == b.spec and a.symmetry_deg == b.symmetry_deg
 
 
 def run(args: argparse.Namespace) -> dict:
     out = check_output_path(args.json, (".json",)) if args.json else None
     a, b = _aperture(args, "a"), _aperture(args, "b")
-    outline_a, outline_b = aperture_outline(a), aperture_outline(b)
+    field_a, field_b = _field_position(args, "a"), _field_position(args, "b")
+    outline_a, outline_b = _outline(a, field_a), _outline(b, field_b)
     metrics = compare_outlines(outline_a, outline_b)
     error = angle_error(a.angle_deg, b.angle_deg, a.symmetry_deg) if same_shape(a, b) else None
     # Rotating a circle changes nothing: no rotation is "best".
@@ -85,14 +139,15 @@ def run(args: argparse.Namespace) -> dict:
     result = {
         "schema_version": SCHEMA_VERSION,
         "bokehfit_version": __version__,
-        "command_line": " ".join(["bokehfit", *sys.argv[1:]]) if sys.argv else "bokehfit",
-        "a": _aperture_json(a),
-        "b": _aperture_json(b),
+        "command_line": args.command_line,
+        "a": _aperture_json(a, field_a),
+        "b": _aperture_json(b, field_b),
         "metrics": metrics,
         "angle_error_deg": error,
         "best_rotation_deg": rotation,
     }
-    print(f"A: {a.describe()}    B: {b.describe()}    (both at unit area)")
+    clipped = " and field position" if field_a or field_b else ""
+    print(f"A: {a.describe()}    B: {b.describe()}    (outlines at unit area{clipped}; the metrics compare them at equal area)")
     print(f"{'metric':<14} {'value':>10}  {'better':<7} description")
     for name, value in metrics.items():
         metric = METRICS[name]

@@ -5,6 +5,23 @@
 outline and keeps those that look like discs (:mod:`bokehfit.discs.measure`
 states the criteria). The result is a :class:`DiscSearch`, falsy with a
 ``reason`` when no disc was found.
+
+Work per photo is bounded: at most :data:`MAX_CANDIDATES` candidates are
+measured (the clearest first: highest peak over the local noise), and the
+result's ``notes`` say how many were found and how many were measured. The
+look-ups between measured discs go through a grid of cells, so a photo with
+tens of thousands of small highlights costs a few seconds, not hours.
+
+Every disc says what it offers as evidence of the aperture's shape
+(``evidence``): ``"plateau"`` a clean disc (outline and interior), ``"edge"``
+its outline only (saturated, or a ring with a bright rim), ``"partial"`` part of
+its outline (cut by the frame, crossed by an occluder, overlapping other discs,
+or joined to other clipped light), with ``outline_seen``, the share of its
+outline that is its own and reliable, and ``outline_reliable`` per outline
+point. Discs whose outlines overlap share a ``cluster`` id; the part of each
+outline that runs inside another disc is not its own. Every measured candidate
+that was not kept is listed in ``rejections`` with the reason
+(``rejected_because``), and counted in ``rejected``.
 """
 
 from __future__ import annotations
@@ -18,16 +35,50 @@ import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 
-from bokehfit.discs.candidates import Candidate, find_candidates
-from bokehfit.discs.measure import RESOLVABLE_PX, Measurement, measure_candidate
-from bokehfit.errors import InputError
+from bokehfit.discs.candidates import LARGE_DISC_PX, Candidate, find_candidates
+from bokehfit.discs.measure import RESOLVABLE_PX, Measurement, measure_candidate, split_cluster
+from bokehfit.errors import InputError, check_finite
 
-__all__ = ["Disc", "DiscSearch", "find_discs", "DEFAULT_MIN_DIAMETER_PX", "DEFAULT_MAX_DIAMETER_PX"]
+__all__ = [
+    "Disc",
+    "DiscSearch",
+    "Rejection",
+    "find_discs",
+    "DEFAULT_MIN_DIAMETER_PX",
+    "DEFAULT_MAX_DIAMETER_PX",
+    "MAX_CANDIDATES",
+    "MAX_LUMINANCE",
+    "MIN_IMAGE_SIDE_PX",
+    "MAX_LARGE_CANDIDATES",
+    "MAX_CLUSTER_CANDIDATES",
+    "FULL_OUTLINE_SEEN",
+    "MIN_OUTLINE_SEEN",
+]
 
 DEFAULT_MIN_DIAMETER_PX = 4.0
 DEFAULT_MAX_DIAMETER_PX = 500.0
-#: Most candidates measured (the strongest first); the rest are counted as rejected.
-MAX_CANDIDATES = 5000
+#: Most candidates measured per photo (the clearest first); the rest are counted as rejected.
+#: A measurement takes about 1–3 ms, so this bounds the measuring to a few seconds.
+MAX_CANDIDATES = 2000
+#: Of those, up to this many candidates of LARGE_DISC_PX or more are measured first whatever
+#: their clarity: a large faint disc has a low peak over the noise, yet thousands of small
+#: glints must not crowd it out. Large candidates are few (one per disc area of the frame).
+MAX_LARGE_CANDIDATES = MAX_CANDIDATES // 10
+#: Most cluster candidates measured (the clearest first): each is measured as a whole and split,
+#: a few times the work of a disc, and most blobs of a busy photo are one disc with its glow.
+MAX_CLUSTER_CANDIDATES = MAX_CANDIDATES // 20
+#: A disc whose reliable share of the outline reaches this is seen whole (a stray point or two
+#: near a frame corner or a pixel of bloom do not make it partial).
+FULL_OUTLINE_SEEN = 0.98
+#: Least share of its outline a disc must show to say something about the shape.
+MIN_OUTLINE_SEEN = 0.5
+#: Outline points closer than this (px) inside another disc's outline belong to the overlap.
+OVERLAP_MARGIN_PX = 1.5
+#: Smallest image searched, in pixels a side: a disc needs a surround to be told from the background.
+MIN_IMAGE_SIDE_PX = 8
+#: Largest luminance accepted (linear light, 1.0 = white). Highlights of real photos stay far
+#: below it; squares of larger values overflow float32 in the fit.
+MAX_LUMINANCE = 1e6
 #: Noise floor of the local noise estimate (linear units).
 MIN_NOISE = 1e-4
 
@@ -47,11 +98,28 @@ class Disc:
     clipped: bool
     overlaps: bool
     resolvable: bool
+    #: What the disc offers: "plateau" (clean), "edge" (the outline only: saturated or a ring),
+    #: "partial" (part of the outline: cut, occluded, overlapping or joined by bloom).
+    evidence: str = "plateau"
+    #: Share of the outline that is the disc's own and reliable, 0–1.
+    outline_seen: float = 1.0
+    #: Per point of ``outline_xy``: True where the outline is the disc's own and reliable.
+    outline_reliable: np.ndarray | None = None
+    #: Shared by discs whose outlines overlap; None for a disc on its own.
+    cluster: int | None = None
+    ring: bool = False  #: rim brighter than the centre (soap-bubble disc)
+    occluded: bool = False  #: crossed by a thin occluder (bridged, outline there not seen)
+    clipped_share: float = 0.0  #: share of the disc's area clipped in the source
 
     @property
     def usable(self) -> bool:
-        """Clean enough to fit a shape to: resolvable, not saturated, clipped or overlapping."""
-        return self.resolvable and not (self.saturated or self.clipped or self.overlaps)
+        """Clean enough to fit a shape to: resolvable, a clean plateau, not saturated, clipped or overlapping."""
+        return self.resolvable and self.evidence == "plateau" and not (self.saturated or self.clipped or self.overlaps)
+
+    @property
+    def shape_usable(self) -> bool:
+        """Its outline says something about the shape: resolvable and at least MIN_OUTLINE_SEEN of it seen."""
+        return self.resolvable and self.outline_seen >= MIN_OUTLINE_SEEN
 
     def to_json(self, outline: bool = True) -> dict:
         data = {
@@ -65,14 +133,38 @@ class Disc:
             "clipped": bool(self.clipped),
             "overlaps": bool(self.overlaps),
             "resolvable": bool(self.resolvable),
-            "used": bool(self.usable),
+            "usable": bool(self.usable),
             "plateau": float(self.plateau),
             "background": float(self.background),
             "snr": round(float(self.snr), 2),
+            "evidence": self.evidence,
+            "outline_seen": round(float(self.outline_seen), 3),
+            "cluster": self.cluster,
+            "ring": bool(self.ring),
+            "occluded": bool(self.occluded),
+            "clipped_share": round(float(self.clipped_share), 4),
         }
         if outline:
             data["outline_xy"] = np.round(self.outline_xy, 3).tolist()
+            if self.outline_reliable is not None:
+                data["outline_reliable"] = [bool(v) for v in self.outline_reliable]
         return data
+
+
+@dataclass(frozen=True)
+class Rejection:
+    """A measured candidate that is not a disc, and why."""
+
+    center_xy: tuple[float, float]
+    diameter_px: float
+    rejected_because: str
+
+    def to_json(self) -> dict:
+        return {
+            "center_xy": [round(float(self.center_xy[0]), 2), round(float(self.center_xy[1]), 2)],
+            "diameter_px": round(float(self.diameter_px), 2),
+            "rejected_because": self.rejected_because,
+        }
 
 
 @dataclass(frozen=True)
@@ -83,6 +175,11 @@ class DiscSearch:
     candidates: int
     rejected: Counter = field(default_factory=Counter)
     time_s: float = 0.0
+    #: One line each, for people: limits reached (``"30976 candidates found, the 2000 clearest measured"``).
+    notes: tuple[str, ...] = ()
+    #: Every measured candidate that was not kept, with its reason (those beyond the
+    #: candidate limit are only counted).
+    rejections: tuple[Rejection, ...] = ()
 
     def __bool__(self) -> bool:
         return bool(self.discs)
@@ -102,18 +199,70 @@ class DiscSearch:
 
 
 def _check_image(luminance) -> np.ndarray:
-    luminance = np.asarray(luminance)
-    if luminance.ndim != 2:
-        raise InputError(f"luminance must be a 2-D array (got shape {luminance.shape})")
-    if luminance.dtype != np.float32:
-        luminance = luminance.astype(np.float32)
-    if not np.isfinite(luminance).all():
+    """``luminance`` as a float32 (M, N) array, or ``InputError`` naming what is wrong."""
+    try:
+        array = np.asarray(luminance)
+    except Exception:  # noqa: BLE001 - ragged lists and the like
+        raise InputError("luminance must be a 2-D array of numbers (got an object NumPy cannot read)") from None
+    if array.dtype == np.bool_ or array.dtype.kind not in "uif":
+        raise InputError(f"luminance must be a 2-D array of real numbers (got dtype {array.dtype})")
+    if array.ndim != 2:
+        raise InputError(f"luminance must be a 2-D array (got shape {array.shape})")
+    if min(array.shape) < MIN_IMAGE_SIDE_PX:
+        raise InputError(
+            f"luminance must be at least {MIN_IMAGE_SIDE_PX}×{MIN_IMAGE_SIDE_PX} pixels (got shape {array.shape})"
+        )
+    if array.dtype != np.float32:
+        with np.errstate(over="ignore"):  # float64 beyond float32's range becomes inf: refused below
+            array = array.astype(np.float32)
+    if not np.isfinite(array).all():
         raise InputError("luminance contains NaN or Inf values")
-    return luminance
+    peak = float(np.abs(array).max())
+    if peak > MAX_LUMINANCE:
+        raise InputError(
+            f"luminance reaches {peak:.3g}; find_discs expects linear light with 1.0 = white and values up to"
+            f" {MAX_LUMINANCE:g}: scale the image"
+        )
+    return array
+
+
+def _check_parameters(shape, clipped, min_diameter_px, max_diameter_px, max_discs) -> tuple:
+    """Validated ``(clipped, min_diameter_px, max_diameter_px, max_discs)`` (module constants for limits)."""
+    if clipped is not None:
+        clipped = np.asarray(clipped)
+        if clipped.shape != shape:
+            raise InputError(f"clipped must have the shape of luminance {shape} (got {clipped.shape})")
+        if clipped.dtype != np.bool_:
+            if clipped.dtype.kind not in "uif":
+                raise InputError(f"clipped must be a boolean array (got dtype {clipped.dtype})")
+            clipped = clipped != 0
+    min_diameter_px = check_finite("min_diameter_px", min_diameter_px)
+    if min_diameter_px < 1.0:
+        raise InputError(f"min_diameter_px must be at least 1 (got {min_diameter_px:g})")
+    if isinstance(max_diameter_px, bool):
+        raise InputError(f"max_diameter_px must be a number or inf (got {max_diameter_px!r})")
+    try:
+        max_diameter_px = float(max_diameter_px)
+    except (TypeError, ValueError):
+        raise InputError(f"max_diameter_px must be a number or inf (got {max_diameter_px!r})") from None
+    if math.isnan(max_diameter_px) or max_diameter_px <= min_diameter_px:
+        raise InputError(
+            f"max_diameter_px must be above min_diameter_px ({min_diameter_px:g}), or inf for no limit"
+            f" (got {max_diameter_px:g})"
+        )
+    if max_discs is not None:
+        if isinstance(max_discs, bool) or not isinstance(max_discs, (int, np.integer)) or max_discs < 1:
+            raise InputError(f"max_discs must be a whole number of at least 1 (got {max_discs!r})")
+        max_discs = int(max_discs)
+    return clipped, min_diameter_px, max_diameter_px, max_discs
 
 
 def _distinct(candidates: list[Candidate]) -> list[Candidate]:
-    """Strongest first; drop a candidate that repeats a stronger one (same place, similar size)."""
+    """Strongest first; drop a candidate that repeats a stronger one (same place, similar size).
+    Cluster candidates repeat only each other: a cluster and its brightest disc are both kept."""
+    kinds = [[c for c in candidates if c.cluster == cluster] for cluster in (False, True)]
+    if all(kinds):
+        return sorted(_distinct(kinds[0]) + _distinct(kinds[1]), key=lambda c: -c.strength)
     kept: list[Candidate] = []
     if not candidates:
         return kept
@@ -131,14 +280,28 @@ def _distinct(candidates: list[Candidate]) -> list[Candidate]:
     return kept
 
 
-def _inside_any(point: tuple[float, float], measurements: list[Measurement]) -> bool:
-    x, y = point
-    for m in measurements:
-        outline = m.outline_xy
-        if (outline[:, 0].min() <= x <= outline[:, 0].max() and outline[:, 1].min() <= y <= outline[:, 1].max()
-                and cv2.pointPolygonTest(outline.astype(np.float32), (float(x), float(y)), False) >= 0):
-            return True
-    return False
+class _OutlineGrid:
+    """Measured outlines filed by the grid cells their bounding boxes cover, for point look-ups."""
+
+    def __init__(self, cell_px: float):
+        self._cell = float(cell_px)
+        self._cells: dict[tuple[int, int], list[tuple[np.ndarray, tuple[float, float, float, float]]]] = {}
+
+    def add(self, outline: np.ndarray) -> None:
+        x0, y0 = outline.min(axis=0)
+        x1, y1 = outline.max(axis=0)
+        entry = (outline.astype(np.float32), (float(x0), float(y0), float(x1), float(y1)))
+        for gx in range(math.floor(x0 / self._cell), math.floor(x1 / self._cell) + 1):
+            for gy in range(math.floor(y0 / self._cell), math.floor(y1 / self._cell) + 1):
+                self._cells.setdefault((gx, gy), []).append(entry)
+
+    def contains(self, point: tuple[float, float]) -> bool:
+        """True when ``point`` lies inside (or on) one of the outlines."""
+        x, y = point
+        for outline, (x0, y0, x1, y1) in self._cells.get((math.floor(x / self._cell), math.floor(y / self._cell)), ()):
+            if x0 <= x <= x1 and y0 <= y <= y1 and cv2.pointPolygonTest(outline, (float(x), float(y)), False) >= 0:
+                return True
+        return False
 
 
 def _flag_neighbours(measurements: list[Measurement]) -> list[bool]:
@@ -187,71 +350,174 @@ def find_discs(
     """
     start = time.perf_counter()
     luminance = _check_image(luminance)
-    if not 1.0 <= min_diameter_px < max_diameter_px:
-        raise InputError(
-            f"min_diameter_px must be at least 1 and below max_diameter_px (got {min_diameter_px}, {max_diameter_px})"
-        )
-    if max_discs is not None and max_discs < 1:
-        raise InputError(f"max_discs must be at least 1 (got {max_discs})")
-    candidates = _distinct(find_candidates(luminance, min_diameter_px, max_diameter_px))
+    clipped, min_diameter_px, max_diameter_px, max_discs = _check_parameters(
+        luminance.shape, clipped, min_diameter_px, max_diameter_px, max_discs
+    )
+    # No disc is larger than the frame's diagonal: that is also what max_diameter_px=inf means.
+    search_max_px = min(max_diameter_px, max(math.hypot(*luminance.shape), 2.0 * min_diameter_px))
+    candidates = _distinct(find_candidates(luminance, min_diameter_px, search_max_px))
     rejected: Counter = Counter()
-    if len(candidates) > MAX_CANDIDATES:
-        rejected["beyond the candidate limit"] = len(candidates) - MAX_CANDIDATES
-        candidates = candidates[:MAX_CANDIDATES]
+    notes: list[str] = []
+    clusters = [c for c in candidates if c.cluster]
+    if len(clusters) > MAX_CLUSTER_CANDIDATES:
+        dropped = {id(c) for c in clusters[MAX_CLUSTER_CANDIDATES:]}  # clearest first, as _distinct sorts them
+        candidates = [c for c in candidates if id(c) not in dropped]
+        rejected["beyond the cluster limit"] = len(dropped)
+        notes.append(
+            f"{len(clusters)} possible clusters of overlapping discs, the {MAX_CLUSTER_CANDIDATES} clearest split"
+            " (limit MAX_CLUSTER_CANDIDATES)"
+        )
+    found = len(candidates)
+    if found > MAX_CANDIDATES:
+        rejected["beyond the candidate limit"] = found - MAX_CANDIDATES
+        # _distinct sorts them clearest first; the large ones go first, up to their quota, then
+        # those large enough to show their shape (RESOLVABLE_PX), then the smaller ones.
+        large = [c for c in candidates if c.diameter_px >= LARGE_DISC_PX][:MAX_LARGE_CANDIDATES]
+        taken = {id(c) for c in large}
+        rest = sorted((c for c in candidates if id(c) not in taken), key=lambda c: c.diameter_px < RESOLVABLE_PX)
+        candidates = large + rest[: MAX_CANDIDATES - len(large)]
+        notes.append(
+            f"{found} candidates found, the {MAX_CANDIDATES} clearest measured (limit MAX_CANDIDATES);"
+            " raise min_diameter_px or crop the photo to measure the others"
+        )
     candidates.sort(key=lambda c: -c.diameter_px)  # a larger disc claims the candidates inside it
     iterator = candidates
     if progress and len(candidates) > 200:
         from tqdm import tqdm
 
         iterator = tqdm(candidates, desc="measuring discs", unit="candidate", leave=False)
+    grid = _OutlineGrid(max(16.0, 4.0 * min_diameter_px))
     measurements: list[Measurement] = []
+    rejections: list[Rejection] = []
     for candidate in iterator:
-        if _inside_any(candidate.center_xy, measurements):
-            rejected["inside a larger disc"] += 1
-            continue
-        m = measure_candidate(
-            luminance, clipped, candidate.center_xy, candidate.diameter_px, candidate.extent_px, MIN_NOISE, min_diameter_px
-        )
-        if isinstance(m, str):
-            rejected[m] += 1
-        elif m.reason is not None:
-            rejected[m.reason] += 1
-        elif m.diameter_px > max_diameter_px:
-            rejected["too large"] += 1
+        reason, where, size = None, candidate.center_xy, candidate.diameter_px
+        if grid.contains(candidate.center_xy):
+            reason = "inside a larger disc"
         else:
-            measurements.append(m)
+            args = (luminance, clipped, candidate.center_xy, candidate.diameter_px, candidate.extent_px, MIN_NOISE)
+            if candidate.cluster:
+                m = measure_candidate(*args, min_diameter_px, cluster=True)
+                parts = [] if isinstance(m, str) else split_cluster(m)
+                parts = [p for p in parts if min_diameter_px <= p.diameter_px <= max_diameter_px]
+                if parts:
+                    measurements.extend(parts)
+                    grid.add(m.outline_xy)
+                else:  # one disc with its glow: its own candidate measures it
+                    rejected["not a cluster"] += 1
+                    rejections.append(Rejection(candidate.center_xy, candidate.diameter_px, "not a cluster"))
+                continue
+            m = measure_candidate(*args, min_diameter_px)
+            if isinstance(m, str):
+                reason = m
+            else:
+                where, size = m.center_xy, m.diameter_px
+                reason = m.reason if m.reason is not None else ("too large" if m.diameter_px > max_diameter_px else None)
+        if reason is None:
+            # A blob of overlapping discs is measured as its discs, each with the outline it shows.
+            parts = split_cluster(m) if m.overlaps and m.diameter_px >= 2.0 * RESOLVABLE_PX else []
+            measurements.extend(p for p in parts if min_diameter_px <= p.diameter_px <= max_diameter_px)
+            if not parts:
+                measurements.append(m)
+            grid.add(m.outline_xy)
+        else:
+            rejected[reason] += 1
+            rejections.append(Rejection(where, size, reason))
     measurements = _distinct_measurements(measurements)
     measurements.sort(key=lambda m: -m.diameter_px)
     if max_discs is not None:
         measurements = measurements[:max_discs]
     overlaps = _flag_neighbours(measurements)
-    discs = [
-        Disc(
-            index=i,
-            center_xy=m.center_xy,
-            diameter_px=m.diameter_px,
-            outline_xy=m.outline_xy,
-            plateau=m.plateau,
-            background=m.background,
-            snr=m.snr,
-            saturated=m.saturated,
-            clipped=m.clipped,
-            overlaps=overlap,
-            resolvable=m.diameter_px >= RESOLVABLE_PX,
+    own, clusters = _own_outlines(measurements)
+    discs = []
+    for i, (m, overlap, reliable, cluster) in enumerate(zip(measurements, overlaps, own, clusters)):
+        seen = float(reliable.mean()) if len(reliable) else 0.0
+        if seen < FULL_OUTLINE_SEEN:
+            evidence = "partial"
+        elif m.saturated or m.ring:
+            evidence = "edge"
+        else:
+            evidence = "plateau"
+        discs.append(
+            Disc(
+                index=i,
+                center_xy=m.center_xy,
+                diameter_px=m.diameter_px,
+                outline_xy=m.outline_xy,
+                plateau=m.plateau,
+                background=m.background,
+                snr=m.snr,
+                saturated=m.saturated,
+                clipped=m.clipped,
+                overlaps=overlap or cluster is not None,
+                resolvable=m.diameter_px >= RESOLVABLE_PX,
+                evidence=evidence,
+                outline_seen=seen,
+                outline_reliable=reliable,
+                cluster=cluster,
+                ring=m.ring,
+                occluded=m.occluded,
+                clipped_share=m.clipped_share,
+            )
         )
-        for i, (m, overlap) in enumerate(zip(measurements, overlaps))
+    return DiscSearch(discs, found, +rejected, time.perf_counter() - start, tuple(notes), tuple(rejections))
+
+
+def _own_outlines(measurements: list[Measurement]) -> tuple[list[np.ndarray], list[int | None]]:
+    """Per disc, which outline points are its own and reliable, and its cluster id.
+
+    A point of one disc's outline that lies inside another disc's outline (or
+    within OVERLAP_MARGIN_PX of it) is the overlap's edge, not the disc's. Discs
+    that overlap so are joined into clusters (numbered from 0 by their largest
+    disc); a disc on its own has cluster None.
+    """
+    own = [
+        m.outline_reliable.copy() if m.outline_reliable is not None else np.ones(len(m.outline_xy), bool)
+        for m in measurements
     ]
-    return DiscSearch(discs, len(candidates), +rejected, time.perf_counter() - start)
+    parent = list(range(len(measurements)))
+
+    def root(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    if len(measurements) >= 2:
+        centres = np.array([m.center_xy for m in measurements])
+        reach = np.array([np.max(np.hypot(*(m.outline_xy - m.center_xy).T)) for m in measurements])
+        tree = cKDTree(centres)
+        for i, m in enumerate(measurements):
+            for j in tree.query_ball_point(m.center_xy, reach[i] + reach.max() + OVERLAP_MARGIN_PX):
+                if j == i or np.hypot(*(centres[j] - centres[i])) > reach[i] + reach[j] + OVERLAP_MARGIN_PX:
+                    continue
+                other = measurements[j].outline_xy.astype(np.float32)
+                inside = np.array(
+                    [cv2.pointPolygonTest(other, (float(x), float(y)), True) >= -OVERLAP_MARGIN_PX for x, y in m.outline_xy]
+                )
+                if inside.any():
+                    own[i] &= ~inside
+                    parent[root(i)] = root(j)
+    roots = [root(i) for i in range(len(measurements))]
+    sizes = Counter(roots)
+    numbers: dict[int, int] = {}
+    clusters = [numbers.setdefault(r, len(numbers)) if sizes[r] > 1 else None for r in roots]
+    return own, clusters
 
 
 def _distinct_measurements(measurements: list[Measurement]) -> list[Measurement]:
     """One measurement per disc: two candidates that converged on the same outline count once."""
     kept: list[Measurement] = []
-    for m in sorted(measurements, key=lambda m: -m.snr):
-        if not any(
-            math.hypot(m.center_xy[0] - k.center_xy[0], m.center_xy[1] - k.center_xy[1]) < 0.25 * k.diameter_px
-            and 0.75 < m.diameter_px / k.diameter_px < 1.33
-            for k in kept
-        ):
-            kept.append(m)
+    if not measurements:
+        return kept
+    order = sorted(measurements, key=lambda m: -m.snr)
+    tree = cKDTree(np.array([m.center_xy for m in order]))
+    dropped = np.zeros(len(order), dtype=bool)
+    for i, m in enumerate(order):
+        if dropped[i]:
+            continue
+        kept.append(m)
+        for j in tree.query_ball_point(m.center_xy, 0.25 * m.diameter_px):
+            other = order[j]
+            if j > i and 0.75 < other.diameter_px / m.diameter_px < 1.33:
+                dropped[j] = True
     return kept

@@ -35,26 +35,68 @@ A candidate is kept as a disc when all of these hold (the rejection reasons):
 ``in a clipped region``  saturated, and the clipping goes on past its outline
                     (more than ``MAX_CLIPPED_RING_SHARE`` of a 2-px ring);
 ``elongated``       the minimum-area rectangle's sides differ by more than
-                    ``MAX_ELONGATION`` (a slit of aspect 0.26 still passes).
+                    ``MAX_ELONGATION`` (a slit of aspect 0.26 still passes);
+``line-like``       the widest circle inside the blob has a radius below
+                    ``MIN_THICKNESS_REL`` of the equal-area radius: a thin streak,
+                    straight or curved (a glint on water, a lit stem), which a
+                    minimum-area rectangle does not call elongated when it bends.
+
+What a kept disc offers (for the fit that comes later):
+
+- **Saturated discs** keep their outline: the 50 % level lies between the
+  background and the clipped plateau, where the disc meets the background,
+  so the clipping moves it little. ``clipped_share`` is the share of the disc's
+  area clipped in the source. Outline points whose outside (2 px out) is
+  clipped too are not reliable: bloom joins the disc to other clipped light.
+- **Occluded discs**: a thin occluder in front of a disc (a branch, a grass
+  blade) cuts a notch or a gap into the region above the 50 % level. A
+  morphological closing of that region with a disc of radius
+  ``OCCLUSION_BRIDGE_REL`` · r bridges gaps up to that width; where the
+  bridged pixels exceed ``OCCLUSION_MIN_SHARE`` of the area, they are given the
+  plateau level, the outline is drawn over them, and the outline points next to
+  them are marked not seen (``outline_reliable``).
+- **Ring discs** (soap-bubble): a thin bright rim around a darker centre. Its
+  half-peak candidate is an annulus, so its equal-area size is too small and the
+  centre holds no plateau. A candidate that reaches ``RING_REACH`` times farther
+  than its equal-area radius, and fails as a plateau disc, is measured again
+  with the rim as the plateau (``RING_PLATEAU_PERCENTILES``); the outer 50 %
+  outline is the disc's. A disc is flagged ``ring`` when the
+  median of its centre (within ``RING_CENTRE_REL`` of the radius) lies below the
+  plateau by more than ``RING_DIP`` of the contrast.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
 from scipy import ndimage
-from skimage import measure
+from skimage import feature, measure, segmentation
 
-from bokehfit.discs.candidates import MIN_CONTRAST_ABS, MIN_CONTRAST_REL
+from bokehfit.discs.candidates import LARGE_DISC_PX, MIN_CONTRAST_ABS, contrast_floor_rel
 
-__all__ = ["Measurement", "measure_candidate", "MIN_SNR", "MIN_SOLIDITY", "MAX_ELONGATION", "RESOLVABLE_PX"]
+__all__ = [
+    "Measurement",
+    "measure_candidate",
+    "split_cluster",
+    "MIN_SNR",
+    "MIN_SOLIDITY",
+    "MAX_ELONGATION",
+    "MIN_THICKNESS_REL",
+    "RESOLVABLE_PX",
+    "OCCLUSION_BRIDGE_REL",
+    "OCCLUSION_MIN_SHARE",
+    "RING_DIP",
+]
 
 MIN_SNR = 4.0
 #: The search window grows by these factors while the outline runs into it.
 WINDOW_GROWTH = (1.0, 2.0, 4.0)
+#: ... but for a window from LARGE_DISC_PX across on only to the second: one 4 times larger
+#: would hold millions of pixels, and an outline that runs out of ±3.4 radii is a
+#: piece of something larger, or touches its neighbours, either way.
 #: A disc cut out of a larger bright region whose outline lies mostly on the
 #: cutting circle is a piece of that region, not a disc.
 MAX_CUT_SHARE = 0.5
@@ -80,6 +122,82 @@ SATURATED_SHARE = 0.002
 #: A saturated "disc" whose surrounding ring is clipped beyond this share is a
 #: piece of a larger clipped region (the sun, a window), not a disc.
 MAX_CLIPPED_RING_SHARE = 0.3
+#: Line-like: the largest inscribed circle's radius over the equal-area radius. A disc has
+#: about 1, the slit of aspect 0.3 (the thinnest aperture) 0.27, a rectangle of sides 1:a
+#: 0.886/√a, so 0.2 refuses streaks longer than about 20 times their width.
+MIN_THICKNESS_REL = 0.2
+#: Gaps bridged as occlusion: up to this share of the disc's radius on each side (a closing
+#: with a disc this large leaves convex shapes, and so every aperture, unchanged but for a
+#: pixel in the star's notches; a branch in front of a disc is thinner).
+OCCLUSION_BRIDGE_REL = 0.15
+#: Bridged pixels count as an occlusion when they exceed this share of the disc's area
+#: (pixel noise along an outline fills a few isolated pixels, far below it).
+OCCLUSION_MIN_SHARE = 0.05
+#: Pieces of a disc that an occluder leaves, as a share of its area: smaller specks (noise
+#: above the level around a faint disc) are not joined to it.
+OCCLUSION_PIECE_SHARE = 0.05
+#: Discs smaller than this radius (px) are not searched for occluders: their notches are
+#: a pixel or two, the size of noise and JPEG blocks.
+OCCLUSION_MIN_RADIUS_PX = 15.0
+#: Outline points within this distance (px) of bridged or cut-off pixels are not seen.
+UNSEEN_MARGIN_PX = 1.5
+#: Ring mode is tried for candidates whose reach (half their bounding box) exceeds their
+#: equal-area radius by this factor: an annulus's half-peak region is hollow (a disc: 1).
+RING_REACH = 1.2
+#: A disc is a ring when its centre lies below the rim by this share of the contrast.
+RING_DIP = 0.25
+#: The centre of a disc, for the ring test: this share of its equal-area radius; its rim, this
+#: band (the blurred edge beyond it would make every disc look darker at the rim, not brighter).
+RING_CENTRE_REL = 0.5
+RING_RIM_REL = (0.7, 0.95)
+#: In ring mode the plateau is taken within the whole disc (plus a pixel): the rim is its edge.
+RING_CORE_REL = 1.05
+#: ... and the plateau is first the rim (90th percentile there): its outer 50 % outline is the
+#: disc's edge. Where the rim is dimmer in places its outline breaks into arcs; then the
+#: median, whose half takes in the rim and the centre (lit too, only less): an outline a
+#: little outside the edge, but closed.
+RING_PLATEAU_PERCENTILES = (90, 50)
+#: Gaps in a ring's rim up to this share of its radius on each side are closed (the rim of a
+#: real soap-bubble disc dims in places: a droplet's highlight is uneven).
+RING_GAP_REL = 0.15
+#: A rim broken beyond that: its outer edge is looked for in RING_ARC_BINS directions between
+#: RING_ARC_BAND times the radius, must be found in RING_MIN_ARC of them, and lie within
+#: RING_ARC_TOLERANCE of the radius of the circle through it.
+RING_ARC_BINS = 64
+RING_ARC_BAND = (0.6, 1.3)
+RING_MIN_ARC = 0.5
+RING_ARC_TOLERANCE = 0.1
+#: The background plane: fitted where the surround has at least this many pixels (a
+#: plane through a handful of pixels would follow their noise), from the pixels within
+#: this many robust deviations of a first fit.
+PLANE_MIN_PIXELS = 200
+PLANE_INLIER_MAD = 3.0
+#: ... and only where the frame holds at least this share of the annulus: a plane fitted to
+#: a surround cut by the frame on two sides is extrapolated across the disc and tilts its plateau.
+PLANE_MIN_ANNULUS_SHARE = 0.6
+#: ... using at most this many of them (evenly spread): the plane's three numbers are then
+#: known to well below the noise, at a fraction of the cost.
+PLANE_MAX_PIXELS = 1000
+#: Splitting a blob of overlapping discs: the peaks of its distance transform (the discs'
+#: centres) must reach this share of the highest (a neck between two discs is lower) and
+#: lie this share of it apart; a part keeps at least SPLIT_MIN_POINTS outline points of its own
+#: (a circle through fewer follows the noise), and points within SPLIT_JUNCTION_PX of another
+#: part are the junction, not its own edge.
+SPLIT_MIN_PEAK_REL = 0.5
+SPLIT_MIN_DISTANCE_REL = 0.5
+SPLIT_MIN_POINTS = 12
+SPLIT_JUNCTION_PX = 2.0
+#: Each part must look like a disc for the blob to be split (else it is a streak, an edge
+#: or a blob of another shape): its own points within SPLIT_MAX_MISFIT_REL of the radius of
+#: their circle (rms; a polygon's outline is within 0.05 of its equal-area circle for six
+#: blades or more, a pentagon's within 0.07), seen over SPLIT_MIN_ARC of the turn, and that
+#: circle SPLIT_MIN_INSIDE inside the blob.
+SPLIT_MAX_MISFIT_REL = 0.08
+SPLIT_MIN_ARC = 0.35
+SPLIT_MIN_INSIDE = 0.85
+#: A cluster's plateau, for its outline: this percentile of its core, where the brightest
+#: overlaps (the light of two or three discs added) are a minority.
+CLUSTER_PLATEAU_PERCENTILE = 50
 
 
 @dataclass(frozen=True)
@@ -100,19 +218,59 @@ class Measurement:
     clipped: bool
     overlaps: bool  #: cut out of a larger bright region, or shaped like two to four merged discs
     reason: str | None
+    #: Per outline point: True where the outline is the disc's own edge and reliable (not the
+    #: frame, a cutting circle, an occluder or clipped bloom).
+    outline_reliable: np.ndarray | None = None
+    clipped_share: float = 0.0  #: share of the disc's area clipped in the source
+    ring: bool = False  #: rim brighter than the centre (soap-bubble disc)
+    occluded: bool = False  #: a thin occluder bridged across the disc
+    thickness: float = 1.0  #: largest inscribed radius over the equal-area radius
 
 
 
-def _annulus_levels(crop: np.ndarray, distance: np.ndarray, radius: float) -> tuple[float, float, float] | None:
-    """Median, robust spread and lift (median − 10th percentile) of the annulus 1.3 r … 1.7 r (+ 2 px)."""
-    ring = crop[(distance >= 1.3 * radius + 1.0) & (distance <= 1.7 * radius + 3.0)]
-    if ring.size < 8:
-        ring = crop[distance >= 1.3 * radius + 1.0]
-    if ring.size < 8:
+def _background_plane(crop: np.ndarray, where: np.ndarray) -> np.ndarray:
+    """A plane fitted to ``crop[where]``, robustly (least squares on the pixels within
+    PLANE_INLIER_MAD scaled deviations of a first fit, so that a neighbouring disc in the
+    surround does not tilt it), evaluated over the whole crop, minus its median over ``where``."""
+    rows, cols = np.nonzero(where)
+    step = max(1, len(rows) // PLANE_MAX_PIXELS)  # a plane needs a few hundred pixels, not all of them
+    rows, cols = rows[::step], cols[::step]
+    values = crop[rows, cols].astype(np.float64)
+    design = np.column_stack([np.ones(len(rows)), rows, cols]).astype(np.float64)
+    inliers = np.ones(len(values), dtype=bool)
+    for _ in range(2):
+        coefficients, *_ = np.linalg.lstsq(design[inliers], values[inliers], rcond=None)
+        residual = values - design @ coefficients
+        spread = 1.4826 * float(np.median(np.abs(residual - np.median(residual))))
+        inliers = np.abs(residual - np.median(residual)) <= PLANE_INLIER_MAD * max(spread, 1e-12)
+        if inliers.sum() < 8:
+            return np.zeros(crop.shape, dtype=np.float32)
+    r, c = np.ogrid[: crop.shape[0], : crop.shape[1]]
+    plane = coefficients[1] * r + coefficients[2] * c
+    return (plane - np.median(design[:, 1:] @ coefficients[1:])).astype(np.float32)
+
+
+def _annulus_levels(crop: np.ndarray, distance: np.ndarray, radius: float):
+    """The crop with the surround's gradient taken out, and the median, robust spread and
+    lift (median − 10th percentile) of its annulus 1.3 r … 1.7 r (+ 2 px).
+
+    The background model at the disc's scale is a plane fitted to the annulus: a
+    smooth gradient across a large disc's surround (haze, vignetting) can exceed
+    the contrast of a faint disc, and no one level would then outline it. Texture
+    and grain stay in the spread.
+    """
+    where = (distance >= 1.3 * radius + 1.0) & (distance <= 1.7 * radius + 3.0)
+    if where.sum() < 8:
+        where = distance >= 1.3 * radius + 1.0
+    if where.sum() < 8:
         return None  # the window holds no surround: the disc fills or overflows the frame
+    annulus_px = math.pi * ((1.7 * radius + 3.0) ** 2 - (1.3 * radius + 1.0) ** 2)
+    if where.sum() >= max(PLANE_MIN_PIXELS, PLANE_MIN_ANNULUS_SHARE * annulus_px):
+        crop = crop - _background_plane(crop, where)
+    ring = crop[where]
     median = float(np.median(ring))
     low = float(np.percentile(ring, 10))
-    return median, 1.4826 * float(np.median(np.abs(ring - median))), median - low
+    return crop, (median, 1.4826 * float(np.median(np.abs(ring - median))), median - low)
 
 
 def _edge_gradient(crop: np.ndarray, outline: np.ndarray) -> float:
@@ -128,12 +286,24 @@ def _outline(crop: np.ndarray, level: float, background: float, seed_rc: tuple[f
     """Closed 50 % contour around ``seed_rc`` (row, col in the crop), or None."""
     # Pad with the background so contours cut by the frame close just outside it.
     padded = np.pad(crop, 1, mode="constant", constant_values=min(background, level - 1e-6))
-    contours = measure.find_contours(padded, level)
+    # Trace only the regions above the level whose boxes hold the seed (the contour around the
+    # seed bounds one of them): a large window over texture holds many others.
+    count, _, stats, _ = cv2.connectedComponentsWithStats((padded > level).view(np.uint8), connectivity=8)
+    x0, y0 = stats[:, cv2.CC_STAT_LEFT], stats[:, cv2.CC_STAT_TOP]
+    x1, y1 = x0 + stats[:, cv2.CC_STAT_WIDTH], y0 + stats[:, cv2.CC_STAT_HEIGHT]
+    row, col = seed_rc[0] + 1.0, seed_rc[1] + 1.0
+    hit = (x0 <= col + 1) & (col - 1 <= x1) & (y0 <= row + 1) & (row - 1 <= y1)
+    hit[0] = False  # the background
+    if not hit.any():
+        return None
+    r0, c0 = max(0, int(y0[hit].min()) - 1), max(0, int(x0[hit].min()) - 1)
+    r1, c1 = int(y1[hit].max()) + 1, int(x1[hit].max()) + 1
+    contours = measure.find_contours(padded[r0:r1, c0:c1], level)
     best, best_area = None, 0.0
     for contour in contours:
         if len(contour) < 4:
             continue
-        xy = contour[:, ::-1] - 1.0  # (row, col) in the padded crop → (x, y) in the crop
+        xy = contour[:, ::-1] + np.array([c0 - 1.0, r0 - 1.0])  # (row, col) in the box → (x, y) in the crop
         area = 0.5 * abs(np.dot(xy[:, 0], np.roll(xy[:, 1], -1)) - np.dot(xy[:, 1], np.roll(xy[:, 0], -1)))
         if area > best_area and cv2.pointPolygonTest(xy.astype(np.float32), (float(seed_rc[1]), float(seed_rc[0])), False) >= 0:
             best, best_area = xy, area
@@ -177,31 +347,163 @@ def _window(luminance: np.ndarray, center_xy: tuple[float, float], half: int):
     return (r0, c0, r1, c1), np.sqrt(rows * rows + cols * cols)
 
 
-def _closed_outline(luminance, center_xy, radius, reach):
+def _bridge_occluders(crop, distance, level, plateau, radius):
+    """``crop`` with thin occluders across the disc raised to the plateau, and the
+    bridged pixels; ``(crop, None)`` where nothing was bridged.
+
+    The region above ``level`` (holes filled: a hole inside the disc leaves the
+    outline alone) is closed with a square of half-side ``OCCLUSION_BRIDGE_REL`` · r
+    (a closing leaves every convex shape as it is, whatever the convex element, and a
+    square's is separable, so fast); only pixels within the disc's reach from the
+    centre count, so the gap to a neighbouring disc is not bridged.
+    """
+    if radius < OCCLUSION_MIN_RADIUS_PX:
+        return crop, None
+    side = 2 * max(2, int(round(OCCLUSION_BRIDGE_REL * radius))) + 1
+    box = _box(distance, 1.05 * radius + 1.0 + side)
+    raised, bridged = _bridge_in_box(crop[box], distance[box], level, plateau, radius, side)
+    if bridged is None:
+        return crop, None
+    crop, mask = crop.copy(), np.zeros(crop.shape, dtype=bool)
+    crop[box], mask[box] = raised, bridged
+    return crop, mask
+
+
+def _box(distance: np.ndarray, reach: float) -> tuple[slice, slice]:
+    """The bounding box of the pixels within ``reach`` of the centre."""
+    rows = np.nonzero((distance <= reach).any(axis=1))[0]
+    cols = np.nonzero((distance <= reach).any(axis=0))[0]
+    if not len(rows):
+        return slice(0, 0), slice(0, 0)
+    return slice(rows[0], rows[-1] + 1), slice(cols[0], cols[-1] + 1)
+
+
+def _bridge_in_box(crop, distance, level, plateau, radius, side):
+    """:func:`_bridge_occluders` within the disc's box."""
+    if crop.size == 0:
+        return crop, None
+    above = ndimage.binary_fill_holes(crop > level)
+    # Only the disc's pieces are joined, not the noise specks around a faint one.
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(above.view(np.uint8), connectivity=8)
+    pieces = np.nonzero(stats[:, cv2.CC_STAT_AREA] >= OCCLUSION_PIECE_SHARE * math.pi * radius * radius)[0]
+    above = np.isin(labels, pieces[pieces > 0])
+    element = cv2.getStructuringElement(cv2.MORPH_RECT, (side, side))
+    closed = cv2.morphologyEx(above.view(np.uint8), cv2.MORPH_CLOSE, element).astype(bool)
+    bridged = closed & ~above & (distance <= 1.05 * radius + 1.0)
+    # An occluder leaves one wide bridged piece; noise along a faint disc's edge, many small ones.
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(bridged.view(np.uint8), connectivity=8)
+    pieces = np.nonzero(stats[:, cv2.CC_STAT_AREA] >= side * side)[0]
+    bridged = np.isin(labels, pieces[pieces > 0])
+    if bridged.sum() <= OCCLUSION_MIN_SHARE * math.pi * radius * radius:
+        return crop, None
+    return np.where(bridged, np.float32(max(plateau, level)), crop), bridged
+
+
+def _ring_arc(crop, level, seed_rc, radius):
+    """The outer arcs of a ring's broken rim and the circle through them: ``(outline,
+    seen)`` with the circle filled in where the rim is not seen, or None.
+
+    Around the seed, in RING_ARC_BINS directions, the farthest point of the 50 %
+    contours between RING_ARC_BAND times the radius is the rim's outer edge; a
+    circle is fitted to them (twice: points off the first circle by more than
+    RING_ARC_TOLERANCE of its radius are dropped). The rim must be seen over
+    RING_MIN_ARC of the directions.
+    """
+    r0 = max(0, int(seed_rc[0] - RING_ARC_BAND[1] * radius - 2))
+    c0 = max(0, int(seed_rc[1] - RING_ARC_BAND[1] * radius - 2))
+    r1, c1 = int(seed_rc[0] + RING_ARC_BAND[1] * radius + 3), int(seed_rc[1] + RING_ARC_BAND[1] * radius + 3)
+    contours = [c[:, ::-1] for c in measure.find_contours(crop[r0:r1, c0:c1], level) if len(c) >= 2]
+    if not contours:
+        return None
+    points = np.vstack(contours) + np.array([c0, r0])  # (x, y) in the crop
+    dx, dy = points[:, 0] - seed_rc[1], points[:, 1] - seed_rc[0]
+    reach = np.hypot(dx, dy)
+    band = (reach >= RING_ARC_BAND[0] * radius) & (reach <= RING_ARC_BAND[1] * radius)
+    if not band.any():
+        return None
+    bins = ((np.arctan2(dy, dx) + math.pi) / (2 * math.pi) * RING_ARC_BINS).astype(int) % RING_ARC_BINS
+    outer = []
+    for b in np.unique(bins[band]):
+        here = np.nonzero(band & (bins == b))[0]
+        outer.append(here[np.argmax(reach[here])])
+    rim = points[outer]
+    for _ in range(2):
+        if len(rim) < RING_MIN_ARC * RING_ARC_BINS:
+            return None
+        cx, cy, fitted = _fit_circle(rim)
+        rim = rim[np.abs(np.hypot(rim[:, 0] - cx, rim[:, 1] - cy) - fitted) <= RING_ARC_TOLERANCE * fitted]
+    if len(rim) < RING_MIN_ARC * RING_ARC_BINS:
+        return None
+    cx, cy, fitted = _fit_circle(rim)
+    order = np.argsort(np.arctan2(rim[:, 1] - cy, rim[:, 0] - cx))
+    return _completed_outline(rim[order], cx, cy, fitted)
+
+
+def _close_ring(crop, distance, level, plateau, radius):
+    """``crop`` with a ring's rim closed where it breaks and its darker centre raised to the
+    plateau, so that its outer outline closes; and the pixels that closed the rim (their
+    outline is not seen), or None.
+
+    The rim's region above ``level`` is closed with a square of half-side
+    ``RING_GAP_REL`` · r (at least 1 px), then its hole filled: the hole is the
+    centre, not a gap.
+    """
+    side = 2 * max(1, int(round(RING_GAP_REL * radius))) + 1
+    box = _box(distance, 1.05 * radius + 1.0 + side)
+    above = crop[box] > level
+    element = cv2.getStructuringElement(cv2.MORPH_RECT, (side, side))
+    closed = cv2.morphologyEx(above.view(np.uint8), cv2.MORPH_CLOSE, element).astype(bool)
+    near = distance[box] <= 1.05 * radius + 1.0
+    filled = ndimage.binary_fill_holes(closed & near)
+    gaps = closed & near & ~ndimage.binary_fill_holes(above & near)
+    raised = crop.copy()
+    raised[box] = np.where(filled & ~above, np.float32(max(plateau, level)), crop[box])
+    if not gaps.any():
+        return raised, None
+    mask = np.zeros(crop.shape, dtype=bool)
+    mask[box] = gaps
+    return raised, mask
+
+
+def _closed_outline(luminance, center_xy, radius, reach, core_rel=0.8, percentile=90):
     """Levels and the closed 50 % outline around ``center_xy``, growing the window
     while the outline runs into it; the last window masks beyond ``reach`` instead
-    (the disc then touches a neighbour). Returns (window, crop, levels, outline, merged)."""
+    (the disc then touches a neighbour). The plateau is the ``percentile`` within
+    ``core_rel`` · r. Returns (window, crop, levels, outline, merged, unseen_pixels,
+    on_cut): the pixels whose outline is not the disc's own (bridged occluders) or
+    None, and per outline point whether it lies on the cutting circle."""
     height, width = luminance.shape
-    for grow in WINDOW_GROWTH:
+    large = max(1.7 * radius + 4.0, reach) >= LARGE_DISC_PX
+    for grow in WINDOW_GROWTH[:2] if large else WINDOW_GROWTH:
         half = int(math.ceil(grow * max(1.7 * radius + 4.0, reach)))
         window, distance = _window(luminance, center_xy, half)
         r0, c0, r1, c1 = window
         crop = luminance[r0:r1, c0:c1]
-        levels = _annulus_levels(crop, distance, radius)
+        levels = _annulus_levels(luminance[r0:r1, c0:c1], distance, radius)
         if levels is None:
             return "no surround"
-        background, noise, ring_lift = levels
-        core = crop[distance <= max(0.8 * radius, 0.75)]
-        plateau = float(np.percentile(core, 90)) if core.size else background
+        crop, (background, noise, ring_lift) = levels
+        core = crop[distance <= max(core_rel * radius, 0.75)]
+        plateau = float(np.percentile(core, percentile)) if core.size else background
         level = background + 0.5 * (plateau - background)
-        if not _contrast_ok(plateau - background, noise, background):
+        if not _contrast_ok(plateau - background, noise, background, 2.0 * radius):
             return "faint"
         seed_rc = (center_xy[1] - r0, center_xy[0] - c0)
-        outline = _outline(crop, level, background, seed_rc)
+        if core_rel == RING_CORE_REL:
+            bridged_crop, bridged = _close_ring(crop, distance, level, plateau, radius)
+        else:
+            bridged_crop, bridged = _bridge_occluders(crop, distance, level, plateau, radius)
+        outline = _outline(bridged_crop, level, background, seed_rc)
+        if outline is None and core_rel == RING_CORE_REL:
+            arc = _ring_arc(crop, level, seed_rc, radius)
+            if arc is not None:  # a rim that breaks: its arcs, and the circle through them
+                levels = (background, plateau, noise, ring_lift)
+                return window, crop, levels, arc[0], False, None, ~arc[1]
         if outline is None:
             return "no outline"
         if not _open_in_window(outline, crop.shape, window, (height, width)):
-            return window, crop, (background, plateau, noise, ring_lift), outline, False
+            levels = (background, plateau, noise, ring_lift)
+            return window, crop, levels, outline, False, bridged, np.zeros(len(outline), dtype=bool)
     # Still open: part of a larger bright structure, or discs run together. Cut
     # the disc out of it with a circle through its neighbours' gap.
     masked = np.where(distance <= reach, crop, min(background, level - 1e-6)).astype(np.float32)
@@ -211,11 +513,28 @@ def _closed_outline(luminance, center_xy, radius, reach):
     on_cut = np.abs(np.hypot(outline[:, 0] - seed_rc[1], outline[:, 1] - seed_rc[0]) - reach) < 1.0
     if on_cut.mean() > MAX_CUT_SHARE:  # mostly the cutting circle: a piece of something larger
         return "part of a larger region"
-    return window, crop, (background, plateau, noise, ring_lift), outline, True
+    return window, crop, (background, plateau, noise, ring_lift), outline, True, None, on_cut
 
 
-def _contrast_ok(contrast: float, noise: float, background: float) -> bool:
-    return contrast >= max(MIN_SNR * noise, MIN_CONTRAST_ABS, MIN_CONTRAST_REL * background)
+def _contrast_ok(contrast: float, noise: float, background: float, diameter_px: float) -> bool:
+    return contrast >= max(MIN_SNR * noise, MIN_CONTRAST_ABS, float(contrast_floor_rel(diameter_px)) * background)
+
+
+def _near(mask: np.ndarray | None, outline: np.ndarray, margin_px: float) -> np.ndarray:
+    """Per outline point (crop coordinates): True within ``margin_px`` of a pixel of ``mask``."""
+    if mask is None or not mask.any():
+        return np.zeros(len(outline), dtype=bool)
+    distance = ndimage.distance_transform_edt(~mask)
+    coords = [np.clip(outline[:, 1], 0, mask.shape[0] - 1), np.clip(outline[:, 0], 0, mask.shape[1] - 1)]
+    return ndimage.map_coordinates(distance, coords, order=1, mode="nearest") <= margin_px
+
+
+def _thickness(blob: np.ndarray, radius: float) -> float:
+    """Radius of the largest circle inside ``blob`` over the equal-area radius ``radius``."""
+    if not blob.any():
+        return 0.0
+    inscribed = float(cv2.distanceTransform(np.pad(blob, 1).view(np.uint8), cv2.DIST_L2, 5).max())
+    return inscribed / max(radius, 1e-6)
 
 
 def measure_candidate(
@@ -226,28 +545,56 @@ def measure_candidate(
     extent_px: float,
     min_noise: float,
     min_diameter_px: float,
+    cluster: bool = False,
 ) -> Measurement | str:
     """Measure the disc around ``center_xy`` of about ``diameter_px``, reaching about
     ``extent_px`` from its centre; a rejection reason where there is no disc to measure.
 
     Two passes: the first uses the candidate's size for the levels, the second
-    the size it measured.
+    the size it measured. A hollow candidate that fails as a plateau disc is
+    measured again as a ring (the module's Notes). A ``cluster`` candidate (a blob
+    that may hold overlapping discs of different brightness) is outlined at half
+    its median level over the surround, so that its dimmer discs are inside the
+    outline: :func:`split_cluster` then splits it.
     """
-    height, width = luminance.shape
     radius = max(1.0, 0.5 * diameter_px)
-    reach = max(radius, extent_px)
+    if cluster:
+        found = _closed_outline(luminance, center_xy, radius, 1.3 * max(radius, extent_px) + 2.0, 0.8, CLUSTER_PLATEAU_PERCENTILE)
+        return found if isinstance(found, str) else _describe(luminance, clipped_mask, found, min_noise, min_diameter_px)
+    found = _two_passes(luminance, center_xy, radius, max(radius, extent_px), 0.8)
+    hollow = extent_px > RING_REACH * radius and extent_px >= RESOLVABLE_PX  # a ring shows as one from 16 px
+    if isinstance(found, str) and found in ("faint", "no outline") and hollow:
+        # A ring's half-peak region is its rim: take its reach as the radius, the rim as the plateau.
+        for percentile in RING_PLATEAU_PERCENTILES:
+            ring = _two_passes(luminance, center_xy, extent_px, extent_px, RING_CORE_REL, percentile)
+            if not isinstance(ring, str):
+                found = ring
+                break
+    if isinstance(found, str):
+        return found
+    return _describe(luminance, clipped_mask, found, min_noise, min_diameter_px)
+
+
+def _two_passes(luminance, center_xy, radius, reach, core_rel, percentile=90):
+    """:func:`_closed_outline` with the candidate's size, then with the measured one."""
     found = None
     for _ in range(2):
-        found = _closed_outline(luminance, center_xy, radius, 1.3 * reach + 2.0)
+        found = _closed_outline(luminance, center_xy, radius, 1.3 * reach + 2.0, core_rel, percentile)
         if isinstance(found, str):
             return found
-        (r0, c0, _, _), _, _, outline, merged = found
+        (r0, c0, _, _), _, _, outline, merged, _, _ = found
         area, cx, cy = _polygon_area_centroid(outline)
         if merged or area <= 0:
             break
         center_xy, radius = (cx + c0, cy + r0), max(1.0, math.sqrt(area / math.pi))
         reach = float(np.max(np.hypot(outline[:, 0] - cx, outline[:, 1] - cy)))
-    (r0, c0, r1, c1), crop, (background, plateau, noise, ring_lift), outline, merged = found
+    return found
+
+
+def _describe(luminance, clipped_mask, found, min_noise, min_diameter_px) -> Measurement:
+    """The :class:`Measurement` of a closed outline: size, shape, flags, what is seen, and the verdict."""
+    height, width = luminance.shape
+    (r0, c0, r1, c1), crop, (background, plateau, noise, ring_lift), outline, merged, bridged, on_cut = found
     contrast = plateau - background
     area, cx, cy = _polygon_area_centroid(outline)
     diameter = 2.0 * math.sqrt(area / math.pi)
@@ -258,17 +605,30 @@ def measure_candidate(
     inside = np.zeros(crop.shape, dtype=np.uint8)
     cv2.fillPoly(inside, [np.round(outline).astype(np.int32)], 1)
     blob = inside.astype(bool)
-    edge_width = contrast / max(_edge_gradient(crop, outline), 1e-12)
+    # The edge is measured where it is seen: not along a cutting circle or a filled-in arc.
+    edge_points = outline[~on_cut] if (~on_cut).sum() >= 4 else outline
+    edge_width = contrast / max(_edge_gradient(crop, edge_points), 1e-12)
     outline_xy = outline + np.array([c0, r0], dtype=np.float64)
     # The padded contour runs outside [0, size − 1] only where the frame cuts the disc.
-    clipped = bool(outline_xy.min() < 0.0 or outline_xy[:, 0].max() > width - 1 or outline_xy[:, 1].max() > height - 1)
+    off_frame = (outline_xy[:, 0] < 0.0) | (outline_xy[:, 1] < 0.0)
+    off_frame |= (outline_xy[:, 0] > width - 1) | (outline_xy[:, 1] > height - 1)
+    clipped = bool(off_frame.any())
+    unseen = off_frame | on_cut | _near(bridged, outline, UNSEEN_MARGIN_PX)
     saturated = clipped_beyond = False
+    clipped_share = 0.0
     if clipped_mask is not None:
         clipped_crop = clipped_mask[r0:r1, c0:c1]
+        clipped_share = float(clipped_crop[blob].sum()) / max(float(blob.sum()), 1.0)
         saturated = int(clipped_crop[blob].sum()) > max(1.0, SATURATED_SHARE * area)
         if saturated:  # a saturated disc's edge is where the clipping stops
             ring = cv2.dilate(inside, np.ones((5, 5), np.uint8)).astype(bool) & ~blob
             clipped_beyond = bool(ring.any()) and clipped_crop[ring].mean() > MAX_CLIPPED_RING_SHARE
+            # Bloom: where the clipping runs on past the outline, that stretch is not the disc's edge.
+            unseen |= _near(ring & clipped_crop, outline, UNSEEN_MARGIN_PX)
+    from_centre = _window_distance(crop.shape, cx, cy) / max(0.5 * diameter, 1e-6)
+    centre, rim = crop[from_centre <= RING_CENTRE_REL], crop[(from_centre >= RING_RIM_REL[0]) & (from_centre <= RING_RIM_REL[1])]
+    is_ring = bool(centre.size and rim.size) and float(np.median(rim) - np.median(centre)) > RING_DIP * contrast
+    thickness = _thickness(blob, 0.5 * diameter)
     depth = max(OVERLAP_DEFECT_MIN_PX, OVERLAP_DEFECT_DEPTH * 0.5 * diameter)
     merged = merged or 2 <= _deep_concavities(outline, depth) <= 4
     # Most of its surround lifted above the rest by other light: the bright lens
@@ -281,14 +641,16 @@ def measure_candidate(
         reason = "too small"
     elif clipped_beyond:
         reason = "in a clipped region"
-    elif not _contrast_ok(contrast, noise, background):
+    elif not _contrast_ok(contrast, noise, background, diameter):
         reason = "faint"
     elif edge_width > max(EDGE_WIDTH_MIN_PX, EDGE_WIDTH_MAX_REL * 0.5 * diameter) and not saturated:
         reason = "soft edge"
-    elif solidity < MIN_SOLIDITY:
-        reason = "not compact"
     elif elongation > MAX_ELONGATION:
         reason = "elongated"
+    elif thickness < MIN_THICKNESS_REL:
+        reason = "line-like"
+    elif solidity < MIN_SOLIDITY:
+        reason = "not compact"
     return Measurement(
         center_xy=(cx + c0, cy + r0),
         diameter_px=diameter,
@@ -304,7 +666,18 @@ def measure_candidate(
         clipped=clipped,
         overlaps=merged,
         reason=reason,
+        outline_reliable=~unseen,
+        clipped_share=clipped_share,
+        ring=is_ring,
+        occluded=bridged is not None,
+        thickness=thickness,
     )
+
+
+def _window_distance(shape: tuple[int, int], cx: float, cy: float) -> np.ndarray:
+    """Distance of every pixel of a crop of ``shape`` from (cx, cy)."""
+    rows, cols = np.ogrid[: shape[0], : shape[1]]
+    return np.hypot(cols - cx, rows - cy)
 
 
 def _open_in_window(outline: np.ndarray, shape: tuple[int, int], window, frame) -> bool:
@@ -318,3 +691,92 @@ def _open_in_window(outline: np.ndarray, shape: tuple[int, int], window, frame) 
         or (c1 < width and x.max() >= shape[1] - 1)
         or (r1 < height and y.max() >= shape[0] - 1)
     )
+
+
+def _fit_circle(xy: np.ndarray) -> tuple[float, float, float]:
+    """Centre and radius of the circle through ``xy`` (algebraic least squares, Kåsa 1976)."""
+    x, y = xy[:, 0], xy[:, 1]
+    design = np.column_stack([x, y, np.ones(len(x))])
+    (a, b, c), *_ = np.linalg.lstsq(design, x * x + y * y, rcond=None)
+    cx, cy = 0.5 * a, 0.5 * b
+    return float(cx), float(cy), float(math.sqrt(max(c + cx * cx + cy * cy, 0.0)))
+
+
+def _completed_outline(own: np.ndarray, cx: float, cy: float, radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """The own outline points with the circle filled in where they leave gaps, ordered by angle,
+    and per point whether it is one of the own points."""
+    angles = np.arctan2(own[:, 1] - cy, own[:, 0] - cx)
+    step = 1.0 / max(radius, 1.0)  # about a pixel along the circle
+    grid = np.arange(-math.pi, math.pi, step)
+    gap = np.abs(np.angle(np.exp(1j * (grid[:, None] - angles[None, :])))).min(axis=1) > 2.0 * step
+    filled = np.column_stack([cx + radius * np.cos(grid[gap]), cy + radius * np.sin(grid[gap])])
+    points = np.vstack([own, filled])
+    seen = np.concatenate([np.ones(len(own), bool), np.zeros(len(filled), bool)])
+    order = np.argsort(np.concatenate([angles, grid[gap]]))
+    return points[order], seen[order]
+
+
+def split_cluster(m: Measurement) -> list[Measurement]:
+    """The discs of a blob of overlapping discs, or an empty list where it is one disc.
+
+    The blob's distance transform peaks at each disc's centre (a disc's centre is
+    farthest from the blob's edge); a watershed from those peaks splits the blob,
+    and each outline point goes to the part it bounds. A part's own points (those
+    not at a junction) give its centre and size (a circle through them: the discs
+    of a cluster share one aperture, which the fit then models); its outline is
+    that circle where the disc is hidden by its neighbours, marked not seen.
+    """
+    origin = np.floor(m.outline_xy.min(axis=0)) - 2.0
+    local = m.outline_xy - origin
+    shape = (int(math.ceil(local[:, 1].max())) + 3, int(math.ceil(local[:, 0].max())) + 3)
+    mask = np.zeros(shape, dtype=np.uint8)
+    cv2.fillPoly(mask, [np.round(local * _SUBPIXEL).astype(np.int32)], 1, shift=4)
+    depth = ndimage.distance_transform_edt(mask)
+    peaks = feature.peak_local_max(
+        depth,
+        min_distance=max(2, int(SPLIT_MIN_DISTANCE_REL * depth.max())),
+        threshold_abs=SPLIT_MIN_PEAK_REL * depth.max(),
+        exclude_border=False,
+    )
+    if len(peaks) < 2:
+        return []
+    markers = np.zeros(shape, dtype=np.int32)
+    markers[peaks[:, 0], peaks[:, 1]] = np.arange(1, len(peaks) + 1)
+    labels = segmentation.watershed(-depth, markers, mask=mask.astype(bool))
+    _, (near_r, near_c) = ndimage.distance_transform_edt(labels == 0, return_indices=True)
+    rows = np.clip(np.round(local[:, 1]).astype(int), 0, shape[0] - 1)
+    cols = np.clip(np.round(local[:, 0]).astype(int), 0, shape[1] - 1)
+    owner = labels[near_r[rows, cols], near_c[rows, cols]]
+    seen_before = m.outline_reliable if m.outline_reliable is not None else np.ones(len(local), bool)
+    parts = []
+    for k in range(1, len(peaks) + 1):
+        others = ndimage.distance_transform_edt(~((labels != k) & (labels > 0)))
+        junction = ndimage.map_coordinates(others, [local[:, 1], local[:, 0]], order=1, mode="nearest") <= SPLIT_JUNCTION_PX
+        own = (owner == k) & seen_before & ~junction
+        if own.sum() < SPLIT_MIN_POINTS:
+            continue
+        cx, cy, radius = _fit_circle(local[own])
+        inscribed = float(depth[peaks[k - 1][0], peaks[k - 1][1]])
+        if not 0.5 * inscribed <= radius <= 2.0 * inscribed:
+            return []  # the own points do not bound a disc around this peak: not a cluster of discs
+        misfit = np.sqrt(np.mean((np.hypot(local[own, 0] - cx, local[own, 1] - cy) - radius) ** 2))
+        turns = np.arctan2(local[own, 1] - cy, local[own, 0] - cx)
+        arc = len(np.unique(((turns + math.pi) / (2 * math.pi) * 32).astype(int) % 32)) / 32
+        rows, cols = np.ogrid[: shape[0], : shape[1]]
+        circle = np.hypot(cols - cx, rows - cy) <= radius
+        inside = float(mask[circle].mean()) if circle.any() else 0.0
+        if misfit > SPLIT_MAX_MISFIT_REL * radius or arc < SPLIT_MIN_ARC or inside < SPLIT_MIN_INSIDE:
+            return []  # a streak or a blob of another shape, not round discs run together
+        outline, seen = _completed_outline(local[own], cx, cy, radius)
+        parts.append(
+            replace(
+                m,
+                center_xy=(cx + origin[0], cy + origin[1]),
+                diameter_px=2.0 * radius,
+                area_px=math.pi * radius * radius,
+                outline_xy=outline + origin,
+                overlaps=True,
+                outline_reliable=seen,
+            )
+        )
+    return parts if len(parts) >= 2 else []

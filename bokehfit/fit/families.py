@@ -1,74 +1,70 @@
-"""The aperture models the fitter tries: each shape family with its free parameters."""
+"""The aperture models the fitter tries: each a shape family's aperture with its free parameters."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-from bokehfit.apertures import Aperture, make_aperture
+from bokehfit.apertures import SHAPES, Aperture, make_aperture
 
 __all__ = ["Family", "FAMILIES", "families_for", "MAX_FIT_BLADES"]
 
 #: Blade counts tried for ``ngon`` beyond the named shapes (3, 4, 5, 6).
 MAX_FIT_BLADES = 12
+#: Parameters every family has (design.md §8): centre (2), size, plateau, background and edge blur.
+DISC_PARAMETERS = 6
 
 
 @dataclass(frozen=True)
 class Family:
-    """A shape family: the registry shape, its blade count, and how many parameters it adds.
+    """A shape family: the aperture at angle 0 whose :attr:`Aperture.parameters` the fit varies.
 
-    Parameters counted for model selection (design.md §8): centre (2), size,
-    plateau, background and edge blur for every family; the angle for all but
-    the circle; the aspect for the slit; the blade count for a generic ngon.
+    Parameters counted for model selection (design.md §8): the
+    ``DISC_PARAMETERS`` of every disc, the aperture's own parameters (the
+    angle for all but the circle, the slit's aspect, each feature switched
+    on), and the blade count where the shape leaves it free (a generic ngon).
     """
 
-    shape: str
-    blades: int | None = None
+    aperture: Aperture
 
     @property
     def name(self) -> str:
-        return f"ngon({self.blades})" if self.shape == "ngon" else self.shape
+        return self.aperture.label
 
     @property
     def parameters(self) -> int:
-        count = 6
-        if self.shape != "circle":
-            count += 1
-        if self.shape == "slit":
-            count += 1
-        if self.shape == "ngon":
-            count += 1
-        return count
+        return DISC_PARAMETERS + len(self.aperture.parameters) + int(self.aperture.spec.takes_blades)
 
-    def aperture(self, angle_deg: float = 0.0, aspect: float | None = None) -> Aperture:
-        return make_aperture(
-            self.shape,
-            angle_deg,
-            blades=self.blades if self.shape == "ngon" else None,
-            aspect=aspect if self.shape == "slit" else None,
-        )
+    def at(self, **values: float) -> Aperture:
+        """The family's aperture with those of ``values`` that are its parameters (the others are ignored)."""
+        own = {name: float(value) for name, value in values.items() if name in self.aperture.parameters}
+        return self.aperture.replace(**own) if own else self.aperture
 
 
+#: Every registry shape with its blade count fixed (the circle first: the simplest model),
+#: then the n-gons of 7 to ``MAX_FIT_BLADES`` blades.
 FAMILIES: tuple[Family, ...] = (
-    Family("circle"),
-    Family("square"),
-    Family("slit"),
-    Family("triangle"),
-    Family("pentagon"),
-    Family("hexagon"),
-    Family("star"),
-    *(Family("ngon", n) for n in range(7, MAX_FIT_BLADES + 1)),
+    # A mask (design.md §3b) is given, not fitted: discs cannot tell its image.
+    *(Family(make_aperture(name)) for name, spec in SHAPES.items() if not spec.takes_blades and not spec.tabulated),
+    *(Family(make_aperture(f"ngon({n})")) for n in range(7, MAX_FIT_BLADES + 1)),
 )
 
 
 def families_for(shapes: list[str] | None) -> tuple[Family, ...]:
-    """The families to try: all, or those whose shape (or ``ngon(N)`` name) is listed."""
+    """The families to try: all, or those named in ``shapes`` (see :meth:`Aperture.is_named`)."""
+    from bokehfit.errors import InputError
+
     if not shapes:
         return FAMILIES
-    chosen = tuple(f for f in FAMILIES if f.shape in shapes or f.name in shapes)
-    known = {f.shape for f in FAMILIES} | {f.name for f in FAMILIES}
-    unknown = [s for s in shapes if s not in known]
+    selected, unknown = set(), []
+    for text in shapes:
+        try:  # "ngon(9)" names the 9-gon; ngon(5) the pentagon; a bare "ngon" every n-gon family
+            matches = {f for f in FAMILIES if f.aperture.is_named(text)}
+        except InputError:
+            matches = set()
+        selected |= matches
+        if not matches:
+            unknown.append(text)
     if unknown:
-        from bokehfit.errors import InputError
-
+        known = {f.aperture.shape for f in FAMILIES} | {f.name for f in FAMILIES}
         raise InputError(f"--shapes must name shapes among {', '.join(sorted(known))} (got {', '.join(unknown)})")
-    return chosen
+    return tuple(f for f in FAMILIES if f in selected)

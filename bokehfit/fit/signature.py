@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bokehfit.apertures import Aperture
+from bokehfit.apertures import Aperture, image_to_aperture
 from bokehfit.fit.families import Family
 
 __all__ = ["SAMPLES", "Screen", "radial_signature", "screen"]
@@ -32,14 +32,18 @@ class Screen:
     """How well one family's outline matches a disc's, at its best angle."""
 
     family: Family
-    angle_deg: float
+    aperture: Aperture  #: the family's aperture at the best angle (and the outline's aspect, for a slit)
     rms: float  #: RMS of (observed − model) radius, in equal-area radii
-    aspect: float | None  #: slit only
+
+    @property
+    def angle_deg(self) -> float:
+        """The best angle, in [0, symmetry) (0 where the aperture has no angle)."""
+        return self.aperture.angle_deg
 
 
 def radial_signature(outline_xy: np.ndarray) -> np.ndarray:
-    """r(θ) / r_eq of a closed outline about its centroid, on the SAMPLES angles (y up)."""
-    x, y = outline_xy[:, 0], -outline_xy[:, 1]  # image rows run down; the aperture frame's y runs up
+    """r(θ) / r_eq of a closed outline (image (column, row) points) about its centroid, on the SAMPLES angles (y up)."""
+    x, y = image_to_aperture(np.asarray(outline_xy, dtype=np.float64)[:, ::-1]).T
     x1, y1 = np.roll(x, -1), np.roll(y, -1)
     cross = x * y1 - x1 * y
     area = 0.5 * cross.sum()
@@ -54,10 +58,10 @@ def radial_signature(outline_xy: np.ndarray) -> np.ndarray:
 
 def _model_signature(aperture: Aperture) -> np.ndarray:
     """r(θ) / r_eq of the unit-area aperture at angle 0: each ray meets the boundary once."""
+    if aperture.is_circle:
+        return np.ones(SAMPLES)
     vertices = aperture.vertices()
     r_eq = 1.0 / np.sqrt(np.pi)
-    if vertices is None:
-        return np.ones(SAMPLES)
     a, b = vertices, np.roll(vertices, -1, axis=0)
     d = np.stack([np.cos(_THETA), np.sin(_THETA)], axis=-1)[:, None, :]  # (S, 1, 2)
     e = (b - a)[None]  # (1, K, 2)
@@ -82,14 +86,17 @@ def _best_shift(observed: np.ndarray, model: np.ndarray) -> tuple[float, float]:
 
 
 def screen(outline_xy: np.ndarray, families: tuple[Family, ...], slit_aspect: float | None) -> list[Screen]:
-    """Every family's best angle and RMS misfit for one outline, best first."""
+    """Every family's best angle and RMS misfit for one outline, best first.
+
+    ``slit_aspect`` (the outline's, None for none) is given to the families
+    that have an ``aspect`` parameter.
+    """
     observed = radial_signature(outline_xy)
     results = []
     for family in families:
-        aspect = slit_aspect if family.shape == "slit" else None
-        aperture = family.aperture(0.0, aspect)
+        aperture = family.at(aspect=slit_aspect) if slit_aspect is not None else family.aperture
         shift, rms = _best_shift(observed, _model_signature(aperture))
-        symmetry = aperture.symmetry_deg
-        angle = 0.0 if symmetry is None else float(np.degrees(shift) % symmetry)
-        results.append(Screen(family, angle, rms, aspect))
+        if aperture.has_angle:
+            aperture = aperture.replace(angle_deg=float(np.degrees(shift) % aperture.symmetry_deg))
+        results.append(Screen(family, aperture, rms))
     return sorted(results, key=lambda s: s.rms)

@@ -1,5 +1,5 @@
 """The WebGPU side of bokehfit: adapter choice, shader loading, buffer layouts."""
 
-from bokehfit.gpu.runtime import GPUContext, get_gpu
+from bokehfit.gpu.runtime import BACKENDS, AdapterChoice, GPUContext, get_gpu
 
-__all__ = ["GPUContext", "get_gpu"]
+__all__ = ["AdapterChoice", "BACKENDS", "GPUContext", "get_gpu"]

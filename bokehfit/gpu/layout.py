@@ -47,6 +47,20 @@ class Struct:
         body = "\n".join(f"    {field}: {kind}," for field, kind in self.fields)
         return f"struct {self.name} {{\n{body}\n}}\n"
 
+    def wgsl_value(self, **values) -> str:
+        """A WGSL constructor expression of one struct value, e.g. ``Params(1u, 0.5f)``; every field must be given.
+
+        For shader code generated around a value (tests, constant parameters);
+        buffers take :meth:`pack`.
+        """
+        record = np.frombuffer(self.pack(**values), dtype=self.dtype)[0]
+        suffix = {"f32": "f", "u32": "u", "i32": "i"}
+        args = ", ".join(
+            f"{float(record[field])!r}f" if kind == "f32" else f"{int(record[field])}{suffix[kind]}"
+            for field, kind in self.fields
+        )
+        return f"{self.name}({args})"
+
     def pack(self, **values) -> bytes:
         """Bytes of one struct value; every field must be given."""
         missing = set(f for f, _ in self.fields) - set(values)

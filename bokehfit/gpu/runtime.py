@@ -1,13 +1,17 @@
-"""Pick a WebGPU adapter through wgpu-py and open one device for the process.
+"""Pick a WebGPU adapter through wgpu-py and open a device on it.
 
-The choice, in order: ``BOKEHFIT_ADAPTER`` (a case-insensitive part of the
-adapter's name, e.g. ``llvmpipe`` or ``H100``) and ``BOKEHFIT_BACKEND``
+The choice is an argument, an :class:`AdapterChoice`: a case-insensitive part
+of the adapter's name (e.g. ``llvmpipe`` or ``H100``) and a backend
 (``vulkan``, ``metal``, ``d3d12`` or ``gl``) narrow the list of adapters; among
 what is left a discrete GPU wins over an integrated one, over a CPU adapter.
-Unless ``BOKEHFIT_BACKEND=gl`` asks for it, only the primary backends (Vulkan,
+Unless the backend ``gl`` is asked for, only the primary backends (Vulkan,
 Metal, D3D12) are opened: OpenGL through wgpu is a last resort, and probing it
 needs a display. With no adapter at all the error names the Debian packages
 that give Mesa's lavapipe, a software Vulkan adapter.
+
+Nothing here reads the environment to choose: the command line turns
+``BOKEHFIT_ADAPTER`` and ``BOKEHFIT_BACKEND`` into an :class:`AdapterChoice`
+(:func:`bokehfit.cli.adapter_from_environment`) and passes it down.
 """
 
 from __future__ import annotations
@@ -17,19 +21,65 @@ import tempfile
 from dataclasses import dataclass
 from functools import lru_cache
 
-from bokehfit.errors import GPUUnavailableError
+from bokehfit.errors import GPUUnavailableError, InputError
 
-__all__ = ["GPUContext", "get_gpu", "use_headless_egl", "ADAPTER_ENV", "BACKEND_ENV"]
+__all__ = ["AdapterChoice", "BACKENDS", "GPUContext", "get_gpu", "use_headless_egl"]
 
-ADAPTER_ENV = "BOKEHFIT_ADAPTER"
-BACKEND_ENV = "BOKEHFIT_BACKEND"
-#: BOKEHFIT_BACKEND value → (wgpu-native instance backend, adapter backend_type).
+#: Backend name → (wgpu-native instance backend, adapter backend_type).
 _BACKENDS = {"vulkan": ("Vulkan", "Vulkan"), "metal": ("Metal", "Metal"), "d3d12": ("DX12", "D3D12"), "gl": ("GL", "OpenGL")}
+#: The backends an :class:`AdapterChoice` may name.
+BACKENDS = tuple(_BACKENDS)
 _TYPE_RANK = {"DiscreteGPU": 0, "IntegratedGPU": 1, "VirtualGPU": 2, "CPU": 3}
 NO_ADAPTER_FIX = (
     "install a Vulkan driver; on Debian or Ubuntu `apt-get install libvulkan1 mesa-vulkan-drivers` "
     "gives the lavapipe CPU adapter"
 )
+
+
+@dataclass(frozen=True)
+class AdapterChoice:
+    """Which WebGPU adapter to open; the defaults take the best one found.
+
+    Parameters
+    ----------
+    name : str
+        A case-insensitive part of the adapter's name (``llvmpipe`` picks
+        Mesa's lavapipe); empty for any adapter.
+    backend : str
+        One of ``BACKENDS`` (``vulkan``, ``metal``, ``d3d12``, ``gl``),
+        case-insensitive; empty for any primary backend.
+
+    Both are stored stripped and lower-case, so equal choices compare and hash
+    equal (:func:`get_gpu` keeps one device per choice).
+
+    Raises
+    ------
+    InputError
+        Naming ``name`` or ``backend`` when it is not a string, or ``backend``
+        when it is not one of ``BACKENDS``.
+
+    Examples
+    --------
+    >>> AdapterChoice("LLVMpipe", "Vulkan")
+    AdapterChoice(name='llvmpipe', backend='vulkan')
+    """
+
+    name: str = ""
+    backend: str = ""
+
+    def __post_init__(self):
+        for field in ("name", "backend"):
+            value = getattr(self, field)
+            if not isinstance(value, str):
+                raise InputError(f"{field} must be a string (got {type(value).__name__})")
+            object.__setattr__(self, field, value.strip().lower())
+        if self.backend and self.backend not in _BACKENDS:
+            raise InputError(f"backend must be one of {', '.join(BACKENDS)} or empty (got {self.backend!r})")
+
+    def describe(self) -> str:
+        """The choice in words, for messages: ``any adapter`` when nothing is asked."""
+        parts = [f"name containing {self.name!r}" if self.name else "", f"backend {self.backend}" if self.backend else ""]
+        return " and ".join(part for part in parts if part) or "any adapter"
 
 
 @dataclass(frozen=True)
@@ -70,19 +120,42 @@ def _rank(info) -> int:
     return _TYPE_RANK.get(info["adapter_type"], 4)
 
 
-@lru_cache(maxsize=1)
-def get_gpu() -> GPUContext:
-    """The process's one GPU context, opened on first use.
+def get_gpu(adapter: AdapterChoice | None = None) -> GPUContext:
+    """A GPU context on the adapter that ``adapter`` chooses, opened on first use.
+
+    Parameters
+    ----------
+    adapter : AdapterChoice, optional
+        Which adapter; ``AdapterChoice()`` (the best one found) by default.
+
+    Returns
+    -------
+    GPUContext
+        The same context for equal choices: opening a device takes up to a
+        second and holds GPU memory, and compiled pipelines are kept per
+        device, so each choice's device is opened once per process and then
+        shared. Different choices get different devices, even where both
+        pick the same adapter.
 
     Raises
     ------
+    InputError
+        When ``adapter`` is not an AdapterChoice.
     GPUUnavailableError
-        When wgpu cannot load, no adapter matches, or the device won't open.
+        When wgpu cannot load, no adapter matches, or the device won't open
+        (not remembered: a later call tries again).
     """
-    want_name = os.environ.get(ADAPTER_ENV, "").strip().lower()
-    want_backend = os.environ.get(BACKEND_ENV, "").strip().lower()
-    if want_backend and want_backend not in _BACKENDS:
-        raise GPUUnavailableError(f"{BACKEND_ENV} must be one of {', '.join(_BACKENDS)} (got {want_backend!r})")
+    if adapter is None:
+        adapter = AdapterChoice()
+    elif not isinstance(adapter, AdapterChoice):
+        raise InputError(f"adapter must be an AdapterChoice (got {type(adapter).__name__})")
+    return _open_gpu(adapter)
+
+
+@lru_cache(maxsize=None)
+def _open_gpu(choice: AdapterChoice) -> GPUContext:
+    """Open a device on the adapter ``choice`` picks (memoised per choice by ``lru_cache``)."""
+    want_name, want_backend = choice.name, choice.backend
     use_headless_egl()
     try:
         import wgpu
@@ -92,6 +165,11 @@ def get_gpu() -> GPUContext:
 
     try:
         set_instance_extras(backends=[_BACKENDS[want_backend][0] if want_backend else "Primary"])
+    except RuntimeError:
+        # wgpu-native makes one instance per process, with the backends of the
+        # first choice opened; a later choice picks among its adapters.
+        pass
+    try:
         adapters = wgpu.gpu.enumerate_adapters_sync()
     except Exception as error:  # wgpu-native raises its own types for driver failures
         raise GPUUnavailableError(f"no WebGPU adapter could be listed ({error}); {NO_ADAPTER_FIX}") from None
@@ -105,10 +183,8 @@ def get_gpu() -> GPUContext:
     if not candidates:
         if not adapters:
             raise GPUUnavailableError(f"no WebGPU adapter found; {NO_ADAPTER_FIX}")
-        wanted = " and ".join(
-            s for s in (want_name and f"{ADAPTER_ENV}={want_name!r}", want_backend and f"{BACKEND_ENV}={want_backend!r}") if s
-        )
-        raise GPUUnavailableError(f"no WebGPU adapter matches {wanted}; found: {', '.join(found)}")
+        note = " (this process lists only the backends of the first adapter choice it opened)" if want_backend else ""
+        raise GPUUnavailableError(f"no WebGPU adapter matches {choice.describe()}; found: {', '.join(found)}{note}")
     adapter = min(candidates, key=lambda a: _rank(a.info))
     limits = {
         "max-storage-buffer-binding-size": adapter.limits["max-storage-buffer-binding-size"],

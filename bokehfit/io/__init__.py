@@ -1,16 +1,13 @@
-"""Reading photos: linear light, clipped pixels, EXIF, colour spaces, camera sensor sizes.
+"""Reading photos: linear light, clipped pixels, EXIF and maker notes, colour spaces, sensor sizes.
 
 The public entry point is :func:`load_photo`, which returns a :class:`Photo`.
 """
 
-from bokehfit.io.cameras import CAMERAS, CameraSpec, lookup_camera
 from bokehfit.io.colour import Encoding, detect_encoding, luminance_weights
-from bokehfit.io.exif import Exif, build_exif, read_exif_tags, sensor_width
+from bokehfit.io.exif import Exif, build_exif, lensfun_camera, read_exif_tags, sensor_width
 from bokehfit.io.photo import MAX_PIXELS, MIN_SIDE_PX, RAW_SUFFIXES, Photo, load_photo
 
 __all__ = [
-    "CAMERAS",
-    "CameraSpec",
     "Encoding",
     "Exif",
     "MAX_PIXELS",
@@ -20,7 +17,7 @@ __all__ = [
     "build_exif",
     "detect_encoding",
     "load_photo",
-    "lookup_camera",
+    "lensfun_camera",
     "luminance_weights",
     "read_exif_tags",
     "sensor_width",

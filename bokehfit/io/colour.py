@@ -15,6 +15,12 @@ from:
    the DCF option file), else an XMP ``photoshop:ICCProfile`` name;
 4. otherwise sRGB is assumed, and the description says so.
 
+A profile's tone curve is used only if it is a usable decoding curve: finite,
+non-decreasing (within :data:`CURVE_MONOTONIC_TOLERANCE`) and rising over
+[0, 1] (a parametric curve's gamma positive, its ``a`` non-zero). A degenerate
+curve (gamma 0, a division by zero, a curve that falls) makes the profile
+unusable: sRGB is assumed and a note says why.
+
 Curves of the known spaces come from colour-science
 (``colour.RGB_COLOURSPACES[name].cctf_decoding``) and are tabulated once per
 bit depth, so decoding an 8- or 16-bit image is a table look-up.
@@ -29,6 +35,7 @@ IEC 61966-2-1 (sRGB); Adobe RGB (1998) Color Image Encoding, 2005.
 from __future__ import annotations
 
 import functools
+import math
 import struct
 import warnings
 from dataclasses import dataclass, field
@@ -58,6 +65,14 @@ KNOWN_SPACES = {
 }
 
 Curve = Callable[[np.ndarray], np.ndarray]
+
+#: A sampled ICC tone curve may fall by this much (of full scale) between samples and still be
+#: taken as non-decreasing: 16-bit tables of real profiles carry rounding noise.
+CURVE_MONOTONIC_TOLERANCE = 1e-3
+#: A tone curve must rise at least this much (of full scale) from code 0 to code 1.
+CURVE_MIN_RISE = 0.01
+#: Samples at which a profile's tone curve is checked (evenly spaced on [0, 1]).
+CURVE_CHECK_SAMPLES = 1025
 
 
 @functools.lru_cache(maxsize=1)
@@ -288,8 +303,14 @@ def _icc_curve(data: bytes) -> tuple[Curve, str]:
         n_params = {0: 1, 1: 3, 2: 4, 3: 5, 4: 7}.get(function)
         if n_params is None:
             raise ValueError(f"unknown parametric curve type {function}")
+        if len(data) < 12 + 4 * n_params:
+            raise ValueError(f"truncated parametric curve type {function}")
         p = _s15f16(data, n_params, 12) + (0.0,) * (7 - n_params)
         g, a, b, c, d, e, f = p
+        if not g > 0:
+            raise ValueError(f"parametric curve type {function} has gamma {g:g}; it must be above 0")
+        if function in (1, 2) and a == 0:
+            raise ValueError(f"parametric curve type {function} has a = 0 (its threshold -b/a divides by zero)")
 
         def parametric(x: np.ndarray) -> np.ndarray:
             x = np.clip(np.asarray(x, dtype=np.float64), 0.0, 1.0)
@@ -307,6 +328,21 @@ def _icc_curve(data: bytes) -> tuple[Curve, str]:
     raise ValueError(f"unsupported tone curve type {kind!r}")
 
 
+def _checked_curve(data: bytes) -> tuple[Curve, str]:
+    """:func:`_icc_curve`, refused with ``ValueError`` unless it is a usable decoding curve."""
+    curve, text = _icc_curve(data)
+    points = np.linspace(0.0, 1.0, CURVE_CHECK_SAMPLES)
+    with np.errstate(all="ignore"):
+        values = np.asarray(curve(points), dtype=np.float64)
+    if values.shape != points.shape or not np.isfinite(values).all():
+        raise ValueError(f"its {text} is not finite on [0, 1]")
+    if np.diff(values).min() < -CURVE_MONOTONIC_TOLERANCE:
+        raise ValueError(f"its {text} falls somewhere on [0, 1] (a decoding curve must not)")
+    if values[-1] - values[0] < CURVE_MIN_RISE:
+        raise ValueError(f"its {text} is flat (it goes from {values[0]:.3g} to {values[-1]:.3g})")
+    return curve, text
+
+
 def _encoding_from_icc(icc: bytes) -> tuple[Encoding | None, str | None]:
     """The encoding an ICC profile describes, and why not when it is None."""
     try:
@@ -322,14 +358,14 @@ def _encoding_from_icc(icc: bytes) -> tuple[Encoding | None, str | None]:
     data_space = icc[16:20]
     try:
         if data_space == b"GRAY" and b"kTRC" in tags:
-            curve, text = _icc_curve(tags[b"kTRC"])
+            curve, text = _checked_curve(tags[b"kTRC"])
             return Encoding(f"ICC {label}", text, source, (0.0, 1.0, 0.0), (curve,) * 3), None
         if data_space == b"RGB " and all(t in tags for t in (b"rTRC", b"gTRC", b"bTRC", b"rXYZ", b"gXYZ", b"bXYZ")):
-            parsed = [_icc_curve(tags[t]) for t in (b"rTRC", b"gTRC", b"bTRC")]
+            parsed = [_checked_curve(tags[t]) for t in (b"rTRC", b"gTRC", b"bTRC")]
             # Colorant Y values (D50-adapted) are the luminance weights; they sum to 1.
             ys = [_s15f16(tags[t], 3)[1] for t in (b"rXYZ", b"gXYZ", b"bXYZ")]
             total = sum(ys)
-            if not total > 0:
+            if not (math.isfinite(total) and total > 0 and min(ys) >= 0):
                 raise ValueError("colorants have no luminance")
             texts = sorted({text for _, text in parsed})
             transfer = texts[0] if len(texts) == 1 else "per-channel tone curves: " + ", ".join(texts)

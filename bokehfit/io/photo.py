@@ -12,6 +12,28 @@ The file's header is read first: an image that is too small, too large
 :class:`~bokehfit.errors.InputError` before anything is decoded. The input
 file is only ever read.
 
+Hostile and damaged files
+-------------------------
+- Every chunk and segment length is checked against the file's size before
+  it is read; metadata larger than :data:`METADATA_MAX_BYTES` (XMP:
+  :data:`~bokehfit.io.exif.XMP_MAX_BYTES`), stored or after decompression,
+  is skipped with a note, never inflated in full.
+- A JPEG whose image data is corrupt (libjpeg's "Corrupt JPEG data" warnings)
+  is read, not refused: the decoder's messages are kept off the terminal and
+  ``Photo.notes`` says in one line that the file is damaged and which rows
+  were decoded (libjpeg fills what it could not decode with flat grey).
+  Damaged PNG image data is refused (libpng stops at the first error); libpng's
+  warnings about other chunks become a note.
+- CMYK and YCCK JPEGs are converted to sRGB by Pillow (Adobe's inverted CMYK
+  included): through littleCMS with the embedded ICC profile when there is a
+  usable one, else naively, ``R = (1 − C)(1 − K)`` and so on; a note says which.
+- Float TIFFs: NaN and ±Inf samples are masked (their pixels are filled from
+  their neighbours and marked in ``clipped``, so that no disc containing them
+  is used); a file whose robust white point (99.9th percentile of the
+  luminance) exceeds :data:`FLOAT_WHITE_MAX` is taken to be in other units and
+  scaled so that it is 1; samples still above :data:`FLOAT_SAMPLE_MAX` are
+  clamped there and marked in ``clipped``. Each of these is counted in a note.
+
 Speed: 8-bit files decode with OpenCV (libjpeg-turbo, libpng) and are
 linearised with a 256-entry table per channel (``cv2.LUT``) and one weighted
 channel sum (``cv2.transform``), in blocks of rows, all in float32: a
@@ -20,9 +42,11 @@ channel sum (``cv2.transform``), in blocks of rows, all in float32: a
 
 from __future__ import annotations
 
+import contextlib
 import os
 import struct
 import sys
+import tempfile
 import zlib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -30,10 +54,36 @@ from pathlib import Path
 import numpy as np
 
 from bokehfit.errors import InputError
-from bokehfit.io.colour import Encoding, detect_encoding, linear_encoding, luminance_weights, srgb_display_lut
-from bokehfit.io.exif import Exif, ExifTags, build_exif, read_exif_tags, xmp_property
+from bokehfit.io.colour import (
+    Encoding,
+    detect_encoding,
+    icc_description,
+    linear_encoding,
+    luminance_weights,
+    named_encoding,
+    srgb_display_lut,
+)
+from bokehfit.io.exif import (
+    XMP_MAX_BYTES,
+    Exif,
+    ExifTags,
+    build_exif,
+    read_exif_tags,
+    read_file_tags,
+    xmp_property,
+)
 
-__all__ = ["Photo", "load_photo", "MIN_SIDE_PX", "MAX_PIXELS", "PROGRESS_MIN_PIXELS", "RAW_SUFFIXES"]
+__all__ = [
+    "Photo",
+    "load_photo",
+    "FLOAT_SAMPLE_MAX",
+    "FLOAT_WHITE_MAX",
+    "METADATA_MAX_BYTES",
+    "MIN_SIDE_PX",
+    "MAX_PIXELS",
+    "PROGRESS_MIN_PIXELS",
+    "RAW_SUFFIXES",
+]
 
 #: Smallest accepted side of an image, in pixels.
 MIN_SIDE_PX = 16
@@ -48,6 +98,18 @@ RAW_SUFFIXES = frozenset(
 )
 #: Rows per block when linearising: keeps the float32 temporaries small.
 _BLOCK_ROWS = 256
+#: Largest metadata block read (bytes, after decompression): an ICC profile or an EXIF block.
+#: Real ones are a few kB to a few hundred kB; larger ones are skipped with a note.
+METADATA_MAX_BYTES = 4 << 20
+#: Float TIFFs whose robust white point (99.9th percentile of the luminance) is above this are
+#: taken to be in other units and scaled so that it is 1 (linear float files put white at 1.0;
+#: HDR merges reach a few hundred).
+FLOAT_WHITE_MAX = 1e4
+#: Float samples above this, after any scaling, are clamped to it and marked clipped: beyond
+#: it, squares of the values overflow float32 (bokehfit.discs.MAX_LUMINANCE is the same bound).
+FLOAT_SAMPLE_MAX = 1e6
+#: Most text kept from a decoder's messages in a note.
+_MESSAGE_MAX_CHARS = 120
 
 _XMP_JPEG = b"http://ns.adobe.com/xap/1.0/\x00"
 _ICC_JPEG = b"ICC_PROFILE\x00"
@@ -82,7 +144,8 @@ class Photo:
     clipped : ndarray of shape (height, width), bool
         Pixels where a channel is at the encoding's maximum in the file
         (8-bit 255, 16-bit 65535; raw: a photosite at or above the white
-        level, or next to one). Always False for float TIFFs. Read-only.
+        level, or next to one). Float TIFFs: the pixels with a NaN or
+        ±Inf sample or one above :data:`FLOAT_SAMPLE_MAX`. Read-only.
     display : ndarray of shape (height, width, 3), uint8
         RGB for overlays: the decoded 8-bit image; 16-bit files rounded to
         8 bits; float and raw files encoded with the sRGB curve (values
@@ -96,6 +159,9 @@ class Photo:
     colour_space : str
         ``"sRGB"``, ``"Adobe RGB (1998)"``, ``"Display P3"``, ``"ProPhoto RGB"``, ``"linear"``,
         ``"camera raw → sRGB primaries (linear)"``, ...
+    notes : tuple of str
+        One line each about what was done to read a file that was not clean: a damaged JPEG,
+        a CMYK conversion, masked float samples, skipped metadata.
     """
 
     path: Path
@@ -108,6 +174,7 @@ class Photo:
     exif: Exif
     linearisation: str
     colour_space: str
+    notes: tuple[str, ...] = ()
 
     def input_json(self) -> dict:
         """The ``input`` object of design.md §7 (plus ``colour_space``), in plain JSON types."""
@@ -119,6 +186,7 @@ class Photo:
             "exif": self.exif.to_json(),
             "linearisation": self.linearisation,
             "colour_space": self.colour_space,
+            "notes": list(self.notes),
         }
 
 
@@ -156,7 +224,11 @@ def load_photo(path: str | os.PathLike, *, max_pixels: int = MAX_PIXELS, progres
     8/16-bit files: each channel is decoded with the transfer curve of the
     colour space found by :func:`bokehfit.io.colour.detect_encoding`, and
     ``Y = w · (R, G, B)`` with that space's weights. Float TIFFs are taken as
-    linear with sRGB primaries (negative values clamped to 0). Raw files are
+    linear with sRGB primaries (negative values clamped to 0; NaN, Inf and
+    absurdly large values handled as the module docstring says). CMYK JPEGs are
+    converted to sRGB first. What was done to a file that was not clean (a
+    damaged JPEG read as far as it goes, skipped metadata) is in
+    ``Photo.notes``, one line each. Raw files are
     developed by LibRaw without gamma, brightening or a lowered maximum, with
     the camera's white balance, into linear sRGB primaries; 1.0 is the white
     level.
@@ -296,22 +368,88 @@ def _orient(image: np.ndarray, orientation: int) -> np.ndarray:
     return image
 
 
-def _imdecode(data: bytes) -> np.ndarray | None:
-    """``cv2.imdecode`` as stored (no orientation, native depth), without OpenCV's log lines.
+@contextlib.contextmanager
+def _library_messages():
+    """Collect what C libraries write to file descriptor 2 meanwhile, instead of showing it.
 
-    libjpeg/libpng/libtiff complaints go to stderr through OpenCV's logger; our own one-line
-    ``InputError`` says what is wrong instead. The log level is restored afterwards.
+    libjpeg prints its warnings ("Corrupt JPEG data: premature end of data segment") with
+    ``fprintf(stderr, ...)``, which no Python or OpenCV setting reaches. The lines are
+    yielded as a list, filled when the block ends, for a one-line note of our own.
+    """
+    lines: list[str] = []
+    try:
+        sys.stderr.flush()
+        saved = os.dup(2)
+    except (OSError, ValueError):  # no descriptor 2 to redirect: let the library print
+        yield lines
+        return
+    with tempfile.TemporaryFile() as sink:
+        os.dup2(sink.fileno(), 2)
+        try:
+            yield lines
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            sink.seek(0)
+            text = sink.read(1 << 16).decode("utf-8", "replace")
+            lines.extend(line.strip() for line in text.splitlines() if line.strip())
+
+
+def _imdecode(data: bytes) -> tuple[np.ndarray | None, list[str]]:
+    """``cv2.imdecode`` as stored (no orientation, native depth), and the decoder's messages.
+
+    libjpeg/libpng/libtiff complaints would go to stderr, through OpenCV's logger or the
+    libraries' own ``fprintf``; they are returned instead, for our own one-line note or
+    ``InputError``. The log level is restored afterwards.
     """
     import cv2
 
     level = cv2.utils.logging.getLogLevel()
     cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
+    pixels = None
     try:
-        return cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED | cv2.IMREAD_IGNORE_ORIENTATION)
-    except cv2.error:
-        return None
+        with _library_messages() as messages:
+            try:
+                pixels = cv2.imdecode(
+                    np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED | cv2.IMREAD_IGNORE_ORIENTATION
+                )
+            except cv2.error:
+                pixels = None
     finally:
         cv2.utils.logging.setLogLevel(level)
+    return pixels, messages
+
+
+def _fill_start_row(pixels: np.ndarray) -> int:
+    """First row of the flat fill at the bottom of an image (its height if there is none).
+
+    Where libjpeg runs out of data it fills the rest of the image with one flat colour
+    (grey, code 128); rows that are wholly that colour, up to the bottom, are the fill.
+    """
+    height = pixels.shape[0]
+    fill = pixels[-1, 0]
+    for r1 in range(height, 0, -_BLOCK_ROWS):
+        r0 = max(0, r1 - _BLOCK_ROWS)
+        block = pixels[r0:r1].reshape(r1 - r0, -1, *pixels.shape[2:3])
+        flat = np.all(block == fill, axis=tuple(range(1, block.ndim)))
+        if not flat.all():
+            return r0 + int(len(flat) - np.argmin(flat[::-1]))
+    return 0
+
+
+def _damage_note(name: str, kind: str, pixels: np.ndarray, messages: list[str]) -> str:
+    """One line: the file is damaged, what the decoder said, and which rows were decoded."""
+    said = " ".join(messages[0].split())
+    if len(said) > _MESSAGE_MAX_CHARS:
+        said = said[: _MESSAGE_MAX_CHARS - 3] + "..."
+    more = f" (+{len(messages) - 1} more)" if len(messages) > 1 else ""
+    height = pixels.shape[0]
+    start = _fill_start_row(pixels)
+    if start < height:
+        read = f"rows 0–{start - 1} of {height} decoded (as stored), the rest is flat fill" if start else "nothing decoded"
+    else:
+        read = f"all {height} rows decoded, but parts may be wrong"
+    return f"{name} is a damaged {kind} file ({said}{more}): {read}; re-export it if you can"
 
 
 def _displayed_size(width: int, height: int, orientation: int) -> tuple[int, int]:
@@ -417,6 +555,7 @@ class _Meta:
     icc: bytes | None = None
     png_srgb: bool = False
     png_gamma: float | None = None
+    notes: list[str] = field(default_factory=list)
 
 
 def _jpeg_header(name: str, data: bytes) -> tuple[_Meta, int]:
@@ -467,7 +606,10 @@ def _jpeg_header(name: str, data: bytes) -> tuple[_Meta, int]:
     # Entropy-coded data stuffs every 0xFF with 0x00, so 0xFFD9 after the first scan is the end-of-image marker.
     if data.rfind(b"\xff\xd9", i) < 0:
         raise InputError(truncated)
-    if icc_chunks:
+    icc_size = sum(len(chunk) for chunk in icc_chunks.values())
+    if icc_size > METADATA_MAX_BYTES:
+        meta.notes.append(f"{name}: its ICC profile holds {icc_size} bytes, more than the {METADATA_MAX_BYTES} read; skipped")
+    elif icc_chunks:
         meta.icc = b"".join(icc_chunks[k] for k in sorted(icc_chunks))
     meta.exif = read_exif_tags(exif_blob)
     return meta, components
@@ -478,23 +620,73 @@ def _load_jpeg(path: Path, data: bytes, max_pixels: int, progress: bool) -> Phot
     if meta.width == 0 or meta.height == 0:
         raise InputError(f"{path.name} is a JPEG file that gives no image size; re-export it")
     _check_size(path.name, meta.width, meta.height, max_pixels)
-    if components not in (1, 3):
-        raise InputError(f"{path.name} is a {components}-channel (CMYK) JPEG; convert it to RGB")
+    if components not in (1, 3, 4):
+        raise InputError(f"{path.name} is a {components}-channel JPEG; convert it to RGB")
     exif = build_exif(meta.exif, meta.xmp, width_px=meta.width, height_px=meta.height)
-    encoding = _encoding_for(meta)
+    notes = list(meta.notes)
     bar = _progress_for(path.name, meta.width, meta.height, exif.orientation, progress)
     try:
-        pixels = _imdecode(data)
+        if components == 4:
+            pixels, order, messages, encoding, note = _decode_cmyk_jpeg(path.name, data, meta.icc)
+            notes.append(note)
+        else:
+            encoding = _encoding_for(meta)
+            (pixels, messages), order = _imdecode(data), "BGR"
         if pixels is None or pixels.shape[:2] != (meta.height, meta.width):
             raise InputError(f"{path.name} could not be decoded as a JPEG; re-export it")
         if pixels.ndim == 3 and pixels.shape[2] != 3:
             raise InputError(f"{path.name} is a {pixels.shape[2]}-channel JPEG; convert it to RGB")
+        if messages:
+            notes.append(_damage_note(path.name, "JPEG", pixels, messages))
         pixels = _orient(pixels, exif.orientation)
         bar.step("decode")
-        luminance, clipped, display = _linearise_integer(pixels, 8, "BGR", encoding, bar)
+        luminance, clipped, display = _linearise_integer(pixels, 8, order, encoding, bar)
     finally:
         bar.close()
-    return _photo(path, luminance, clipped, display, False, exif, encoding.describe(), encoding.colour_space)
+    return _photo(
+        path, luminance, clipped, display, False, exif, encoding.describe(), encoding.colour_space, notes
+    )
+
+
+def _decode_cmyk_jpeg(name: str, data: bytes, icc: bytes | None):
+    """A CMYK or YCCK JPEG as 8-bit sRGB: ``(pixels, "RGB", messages, encoding, note)``.
+
+    Pillow decodes it (libjpeg turns YCCK into CMYK; Pillow undoes Adobe's inverted
+    CMYK). With a usable embedded CMYK profile, littleCMS converts to sRGB (perceptual
+    intent); otherwise Pillow's naive conversion ``R = (1 − C)(1 − K)``,
+    ``G = (1 − M)(1 − K)``, ``B = (1 − Y)(1 − K)``, which ignores ink and paper.
+    """
+    import io
+    import warnings
+
+    from PIL import Image, ImageCms
+
+    with _library_messages() as messages, warnings.catch_warnings():
+        warnings.simplefilter("ignore", Image.DecompressionBombWarning)  # max_pixels was checked
+        try:
+            image = Image.open(io.BytesIO(data))
+            image.load()
+        except (OSError, ValueError, SyntaxError, Image.DecompressionBombError) as error:
+            raise InputError(f"{name} could not be decoded as a CMYK JPEG ({_short(error)}); re-export it") from None
+    if image.mode != "CMYK":
+        raise InputError(f"{name} is a 4-channel JPEG that decodes as {image.mode}; convert it to RGB")
+    how = None
+    if icc and icc[16:20] == b"CMYK":
+        label = icc_description(icc) or "no description"
+        try:
+            source = ImageCms.ImageCmsProfile(io.BytesIO(icc))
+            rgb = ImageCms.profileToProfile(image, source, ImageCms.createProfile("sRGB"), outputMode="RGB")
+            how = f"with its embedded ICC profile '{label}' (littleCMS, perceptual intent)"
+        except (ImageCms.PyCMSError, OSError, ValueError) as error:
+            why = f"its embedded ICC profile '{label}' is not usable ({_short(error)})"
+    else:
+        why = "no CMYK ICC profile in the file"
+    if how is None:
+        rgb = image.convert("RGB")
+        how = f"naively, R = (1 − C)(1 − K) and so on ({why}; colours are approximate)"
+    pixels = np.asarray(rgb, dtype=np.uint8)
+    encoding = named_encoding("sRGB", "the conversion from CMYK")
+    return pixels, "RGB", list(messages), encoding, f"{name} is a CMYK JPEG: converted to sRGB {how}"
 
 
 def _encoding_for(meta: _Meta) -> Encoding:
@@ -510,7 +702,7 @@ def _encoding_for(meta: _Meta) -> Encoding:
     )
 
 
-def _photo(path, luminance, clipped, display, raw, exif, linearisation, colour_space) -> Photo:
+def _photo(path, luminance, clipped, display, raw, exif, linearisation, colour_space, notes=()) -> Photo:
     height, width = luminance.shape
     return Photo(
         path=path,
@@ -523,6 +715,7 @@ def _photo(path, luminance, clipped, display, raw, exif, linearisation, colour_s
         exif=exif,
         linearisation=linearisation,
         colour_space=colour_space,
+        notes=tuple(notes),
     )
 
 
@@ -542,28 +735,39 @@ def _png_header(name: str, data: bytes) -> _Meta:
         if i + 8 > n:
             raise InputError(truncated)
         length, kind = struct.unpack(">I4s", data[i : i + 8])
-        if i + 12 + length > n:
+        if i + 12 + length > n:  # checked before anything is read
             raise InputError(truncated)
-        body = data[i + 8 : i + 8 + length]
+        wanted = kind in (b"IHDR", b"iCCP", b"sRGB", b"gAMA", b"eXIf", b"iTXt")
+        cap = XMP_MAX_BYTES if kind == b"iTXt" else METADATA_MAX_BYTES
+        if wanted and length > cap:
+            meta.notes.append(
+                f"{name}: its {kind.decode('latin-1')} chunk holds {length} bytes, more than the {cap} read; skipped"
+            )
+            wanted = False
+        body = data[i + 8 : i + 8 + length] if wanted else b""
         if first:
             if kind != b"IHDR" or length < 13:
                 raise InputError(f"{name} is a damaged PNG file (no IHDR chunk); re-export it")
             meta.width, meta.height = struct.unpack(">II", body[:8])
             first = False
-        elif kind == b"iCCP":
+        elif kind == b"iCCP" and wanted:
             try:
                 separator = body.index(b"\x00")
-                meta.icc = zlib.decompress(body[separator + 2 :])
+                meta.icc = _inflate(body[separator + 2 :], METADATA_MAX_BYTES)
             except (ValueError, zlib.error):
                 meta.icc = None
+            if meta.icc is None and length:
+                meta.notes.append(f"{name}: its ICC profile is damaged or inflates past {METADATA_MAX_BYTES} bytes; ignored")
         elif kind == b"sRGB":
             meta.png_srgb = True
         elif kind == b"gAMA" and length == 4:
             meta.png_gamma = struct.unpack(">I", body)[0] / 100000.0 or None
-        elif kind == b"eXIf":
+        elif kind == b"eXIf" and wanted:
             exif_blob = body
         elif kind == b"iTXt" and body.startswith(b"XML:com.adobe.xmp\x00"):
-            meta.xmp = _itxt_text(body)
+            meta.xmp = _itxt_text(body, XMP_MAX_BYTES)
+            if meta.xmp is None:
+                meta.notes.append(f"{name}: its XMP packet is damaged or inflates past {XMP_MAX_BYTES} bytes; ignored")
         elif kind == b"IEND":
             break
         i += 12 + length
@@ -571,14 +775,26 @@ def _png_header(name: str, data: bytes) -> _Meta:
     return meta
 
 
-def _itxt_text(body: bytes) -> bytes | None:
+def _inflate(data: bytes, cap: int) -> bytes | None:
+    """zlib-decompressed ``data``, or None when it would be longer than ``cap`` bytes.
+
+    At most ``cap + 1`` bytes are ever produced: a small chunk that inflates to
+    gigabytes costs no more than a legitimate one.
+    """
+    inflater = zlib.decompressobj()
+    out = inflater.decompress(data, cap + 1)
+    return None if len(out) > cap else out
+
+
+def _itxt_text(body: bytes, cap: int) -> bytes | None:
+    """The text of an iTXt chunk (decompressed up to ``cap`` bytes), or None."""
     try:
         keyword_end = body.index(b"\x00")
         compressed = body[keyword_end + 1]
         rest = body[keyword_end + 3 :]
         rest = rest[rest.index(b"\x00") + 1 :]  # language tag
         rest = rest[rest.index(b"\x00") + 1 :]  # translated keyword
-        return zlib.decompress(rest) if compressed else rest
+        return _inflate(rest, cap) if compressed else rest
     except (ValueError, IndexError, zlib.error):
         return None
 
@@ -590,9 +806,14 @@ def _load_png(path: Path, data: bytes, max_pixels: int, progress: bool) -> Photo
     encoding = _encoding_for(meta)
     bar = _progress_for(path.name, meta.width, meta.height, exif.orientation, progress)
     try:
-        pixels = _imdecode(data)
+        pixels, messages = _imdecode(data)
         if pixels is None or pixels.shape[:2] != (meta.height, meta.width):
-            raise InputError(f"{path.name} could not be decoded as a PNG (damaged image data); re-export it")
+            said = f": {_short(Exception(messages[0]))}" if messages else ""
+            raise InputError(f"{path.name} could not be decoded as a PNG (damaged image data{said}); re-export it")
+        if messages:  # libpng stops at errors in the image data: these are warnings about other chunks
+            said = _short(Exception(" ".join(messages[0].split()).removeprefix("libpng warning: ")))
+            more = f" (+{len(messages) - 1} more)" if len(messages) > 1 else ""
+            meta.notes.append(f"{path.name}: the PNG decoder warned ({said}{more}); the image data decoded in full")
         bits = 16 if pixels.dtype == np.uint16 else 8
         if pixels.ndim == 3:
             pixels = pixels[..., :3] if pixels.shape[2] >= 3 else pixels[..., 0]  # drop alpha
@@ -601,7 +822,9 @@ def _load_png(path: Path, data: bytes, max_pixels: int, progress: bool) -> Photo
         luminance, clipped, display = _linearise_integer(pixels, bits, "BGR", encoding, bar)
     finally:
         bar.close()
-    return _photo(path, luminance, clipped, display, False, exif, encoding.describe(), encoding.colour_space)
+    return _photo(
+        path, luminance, clipped, display, False, exif, encoding.describe(), encoding.colour_space, meta.notes
+    )
 
 
 # --------------------------------------------------------------------------------------
@@ -638,6 +861,11 @@ def _load_tiff(path: Path, data: bytes, max_pixels: int, progress: bool) -> Phot
         meta = _Meta(
             width, height, tags, xmp if isinstance(xmp, bytes) else None, icc if isinstance(icc, bytes) else None
         )
+        for what, attribute, cap in (("XMP packet", "xmp", XMP_MAX_BYTES), ("ICC profile", "icc", METADATA_MAX_BYTES)):
+            if getattr(meta, attribute) is not None and len(getattr(meta, attribute)) > cap:
+                meta.notes.append(f"{path.name}: its {what} holds {len(getattr(meta, attribute))} bytes, more than"
+                                  f" the {cap} read; skipped")
+                setattr(meta, attribute, None)
         exif = build_exif(tags, meta.xmp, width_px=width, height_px=height)
         bar = _progress_for(path.name, width, height, exif.orientation, progress)
         try:
@@ -650,7 +878,7 @@ def _load_tiff(path: Path, data: bytes, max_pixels: int, progress: bool) -> Phot
             if photometric == 0 and pixels.dtype.kind == "u":  # MINISWHITE
                 pixels = np.iinfo(pixels.dtype).max - pixels
             if pixels.dtype.kind == "f":
-                return _finish_float_tiff(path, pixels, order, exif, bar)
+                return _finish_float_tiff(path, pixels, order, exif, bar, meta.notes)
             if pixels.dtype not in (np.uint8, np.uint16):
                 raise InputError(f"{path.name} has {pixels.dtype} samples; save it as an 8/16-bit or float32 TIFF")
             pixels = _orient(np.ascontiguousarray(pixels), exif.orientation)
@@ -659,7 +887,9 @@ def _load_tiff(path: Path, data: bytes, max_pixels: int, progress: bool) -> Phot
             luminance, clipped, display = _linearise_integer(pixels, bits, order, encoding, bar)
         finally:
             bar.close()
-    return _photo(path, luminance, clipped, display, False, exif, encoding.describe(), encoding.colour_space)
+    return _photo(
+        path, luminance, clipped, display, False, exif, encoding.describe(), encoding.colour_space, meta.notes
+    )
 
 
 def _short(error: Exception) -> str:
@@ -682,27 +912,66 @@ def _decode_tiff(name: str, page, data: bytes) -> tuple[np.ndarray, str]:
             array = np.moveaxis(array, axes.index("S"), -1)
         array = array.reshape(array.shape[-3:] if array.ndim >= 3 and "S" in axes else array.shape[-2:])
         return array, "RGB"
-    pixels = _imdecode(data)
+    pixels, _ = _imdecode(data)
     if pixels is None:
         raise InputError(f"{name} could not be decoded as a TIFF (damaged or unsupported compression); re-export it")
     return pixels, "BGR"
 
 
-def _finish_float_tiff(path: Path, pixels: np.ndarray, order: str, exif: Exif, bar: _Progress) -> Photo:
+def _robust_white(pixels: np.ndarray) -> float:
+    """The 99.9th percentile of the finite, positive luminance of a float image (0 if none).
+
+    Taken on a sample of at most about a million pixels, in float64 (float32 overflows
+    for samples near its limit).
+    """
+    step = max(1, round(float(np.sqrt(pixels.shape[0] * pixels.shape[1] / 1e6))))
+    sample = np.asarray(pixels[::step, ::step], dtype=np.float64)
+    if sample.ndim == 3:
+        with np.errstate(invalid="ignore", over="ignore"):
+            sample = sample[..., :3] @ np.asarray(luminance_weights("sRGB"))
+    sample = sample[np.isfinite(sample) & (sample > 0)]
+    return float(np.percentile(sample, 99.9)) if sample.size else 0.0
+
+
+def _finish_float_tiff(path: Path, pixels: np.ndarray, order: str, exif: Exif, bar: _Progress, notes: list[str]) -> Photo:
+    """Luminance, mask and display of a float TIFF (module docstring: masking, scaling, clamping)."""
     import cv2
 
-    pixels = np.array(pixels, dtype=np.float32, order="C")  # our own copy: clamped in place
+    notes = list(notes)
     if pixels.ndim == 3 and order == "BGR":
-        pixels = np.ascontiguousarray(pixels[..., ::-1])
-    negatives = 0
+        pixels = pixels[..., ::-1]
+    white = _robust_white(pixels)
+    scale = 1.0 / white if white > FLOAT_WHITE_MAX else 1.0
+    out = np.empty(pixels.shape, dtype=np.float32)  # our own copy: masked, scaled and clamped in place
+    nonfinite = np.zeros(pixels.shape[:2], dtype=np.bool_)
+    unusable = np.zeros(pixels.shape[:2], dtype=np.bool_)
+    masked = negatives = clamped = 0
     for r0, r1 in _blocks(pixels.shape[0]):
-        block = pixels[r0:r1]
-        if not np.isfinite(block).all():
-            raise InputError(f"{path.name} contains NaN or Inf values; replace them with finite numbers")
+        block = np.array(pixels[r0:r1], dtype=np.float64)
+        bad = ~np.isfinite(block)
+        if bad.any():
+            block[bad] = 0.0
+            bad_pixels = bad if bad.ndim == 2 else bad.any(axis=-1)
+            masked += int(np.count_nonzero(bad_pixels))
+            nonfinite[r0:r1] = bad_pixels
+            unusable[r0:r1] |= bad_pixels
+        if scale != 1.0:
+            block *= scale
         below = block < 0
         negatives += int(np.count_nonzero(below))
         block[below] = 0.0
-    pixels = _orient(pixels, exif.orientation)
+        above = block > FLOAT_SAMPLE_MAX
+        if above.any():
+            above_pixels = above if above.ndim == 2 else above.any(axis=-1)
+            clamped += int(np.count_nonzero(above_pixels))
+            unusable[r0:r1] |= above_pixels
+            block[above] = FLOAT_SAMPLE_MAX
+        out[r0:r1] = block
+    if masked == unusable.size:
+        raise InputError(f"{path.name} has no finite sample (all are NaN or Inf); check the file")
+    pixels = _orient(out, exif.orientation)
+    unusable = _orient(unusable, exif.orientation)
+    nonfinite = _orient(nonfinite, exif.orientation)
     height, width = pixels.shape[:2]
     encoding = linear_encoding("float TIFF")
     luminance = np.empty((height, width), dtype=np.float32)
@@ -713,13 +982,27 @@ def _finish_float_tiff(path: Path, pixels: np.ndarray, order: str, exif: Exif, b
         for r0, r1 in _blocks(height):
             cv2.transform(pixels[r0:r1], weights, dst=luminance[r0:r1])
             bar.step("linearise")
-    clipped = np.zeros((height, width), dtype=np.bool_)
+    if masked:
+        # Fill the masked pixels from their neighbours, so that they make no edges of their own.
+        luminance = cv2.inpaint(luminance, nonfinite.view(np.uint8), 3, cv2.INPAINT_TELEA)
+        notes.append(
+            f"{path.name}: {masked} pixels with NaN or Inf samples masked (filled from their neighbours,"
+            " flagged like clipped pixels, so that no disc containing them is used)"
+        )
     display = _display_from_linear(pixels, 1.0)
     bar.step("display")
     text = "linear float TIFF (sRGB primaries assumed, 1.0 = white)"
+    if scale != 1.0:
+        text += f"; scaled by {scale:.3g} so that the robust white point (99.9th percentile, {white:.3g}) is 1"
+        notes.append(
+            f"{path.name}: values up to {white:.3g} at the 99.9th percentile, far above 1.0 = white: scaled by"
+            f" {scale:.3g}"
+        )
     if negatives:
         text += f"; {negatives} negative values clamped to 0"
-    return _photo(path, luminance, clipped, display, False, exif, text, encoding.colour_space)
+    if clamped:
+        notes.append(f"{path.name}: {clamped} pixels above {FLOAT_SAMPLE_MAX:g} clamped there and flagged like clipped pixels")
+    return _photo(path, luminance, unusable, display, False, exif, text, encoding.colour_space, notes)
 
 
 # --------------------------------------------------------------------------------------
@@ -733,44 +1016,27 @@ _RAW_PARAMETERS = "rawpy: gamma 1, no auto-brightening, adjust_maximum_thr=0, ca
 
 
 def _raw_metadata(path: Path) -> tuple[ExifTags, bytes | None]:
-    """EXIF tags and XMP of a raw file, best effort (TIFF-based raws, CR3, embedded JPEG EXIF)."""
+    """EXIF tags (maker notes included) and XMP of a raw file.
+
+    exiv2 reads every common raw format (TIFF-based raws, CR3, RAF, ORF, RW2, ...); for a
+    file it does not know, the EXIF block of an embedded JPEG preview and an XMP packet
+    are sought in the file's bytes, best effort.
+    """
+    tags, xmp = read_file_tags(path)
+    if tags.ifd0 or tags.exif:
+        return tags, xmp
     try:
         data = path.read_bytes()
     except OSError:
         return ExifTags(), None
-    tags = ExifTags()
-    if data[:4] in (b"II*\x00", b"MM\x00*"):
-        tags = read_exif_tags(data)
-    elif data[:2] in (b"II", b"MM") and data[2:4] in (b"RO", b"RS", b"U\x00", b"OR", b"\x00U"):
-        # ORF and RW2 are TIFF with another magic number: patch it for the parser.
-        patched = bytearray(data)
-        patched[2:4] = b"*\x00" if data[:2] == b"II" else b"\x00*"
-        tags = read_exif_tags(bytes(patched))
-    elif data[4:8] == b"ftyp":
-        tags = _cr3_tags(data)
-    if not tags.ifd0 and not tags.exif:
-        start = data.find(b"Exif\x00\x00", 0, 4 << 20)  # e.g. the JPEG preview inside a RAF
-        if start >= 0:
-            tags = read_exif_tags(data[start:])
-    xmp = tags.ifd0.get(700)
-    if not isinstance(xmp, bytes):
+    start = data.find(b"Exif\x00\x00", 0, 4 << 20)
+    if start >= 0:
+        tags = read_exif_tags(data[start : start + METADATA_MAX_BYTES])
+    if xmp is None:
         start = data.find(b"<x:xmpmeta")
-        end = data.find(b"</x:xmpmeta>", start) if start >= 0 else -1
+        end = data.find(b"</x:xmpmeta>", start, start + XMP_MAX_BYTES) if start >= 0 else -1
         xmp = data[start : end + 12] if end >= 0 else None
     return tags, xmp
-
-
-def _cr3_tags(data: bytes) -> ExifTags:
-    """Canon CR3 (ISO base media): IFD0 in the CMT1 box, the EXIF IFD in CMT2."""
-    boxes = {}
-    for name in (b"CMT1", b"CMT2"):
-        at = data.find(name, 0, 1 << 20)
-        if at >= 4:
-            (size,) = struct.unpack(">I", data[at - 4 : at])
-            boxes[name] = data[at + 4 : at - 4 + size]
-    ifd0 = read_exif_tags(boxes.get(b"CMT1")).ifd0
-    exif = read_exif_tags(boxes.get(b"CMT2")).ifd0
-    return ExifTags(ifd0, exif, {})
 
 
 def _load_raw(path: Path, max_pixels: int, progress: bool) -> Photo:

@@ -12,6 +12,27 @@
 ``samples`` always counts point samples over the disc: ``mc`` draws that many
 points on the aperture; ``raster`` draws ⌈samples / disc area in px²⌉ passes,
 so that both put the same number of samples in a pixel the disc covers.
+
+The real-lens features of design.md §3b are in every method: rounded blades,
+the squeeze and the vignetting cut through the exact outline (``exact``), the
+WGSL twin ``sample_aperture_params`` (``mc``) and the outline's polygon
+(``raster``); ``rim`` is tabulated in ``exact``
+(:func:`bokehfit.kernels.exact.rim_coverage`, with a stated bound), drawn
+with its density in ``mc`` and weighted per fragment in ``raster``.
+``chromatic`` gives three channels (red, green, blue), the red and blue discs
+scaled by (1 + red) and (1 + blue). The near side is :meth:`Aperture.near`.
+
+A ``mask`` aperture (design.md §3b): ``exact`` integrates its piecewise-constant
+transmission over each pixel exactly, at any angle and squeeze
+(:func:`bokehfit.kernels.exact.mask_coverage`); ``mc`` samples it with the
+WGSL twin ``sample_mask`` from the CDF tables in a storage buffer; ``raster``
+has no outline to draw for it and gives the exact kernel (the GL pipeline
+rasterises outlines; a textured-quad path is not written yet), reporting no
+samples.
+
+Vignetting: a kernel is always renormalised to sum to 1 (per channel); the
+light the barrel stops is reported as :attr:`Kernel.transmitted`, the share
+of the unclipped aperture's light that passes (1 without vignetting).
 """
 
 from __future__ import annotations
@@ -25,9 +46,11 @@ from typing import Callable
 import numpy as np
 
 from bokehfit.apertures import Aperture, make_aperture
-from bokehfit.errors import InputError, check_positive
+from bokehfit.errors import InputError
+from bokehfit.gpu.runtime import AdapterChoice
 from bokehfit.kernels.accuracy import plan_kernel
-from bokehfit.kernels.exact import coverage, quadrant_area
+from bokehfit.kernels.exact import coverage, mask_coverage, quadrant_area, rim_coverage
+from bokehfit.validate import RANGES, check
 
 __all__ = ["METHODS", "SAMPLINGS", "SIDES", "Kernel", "KernelMethod", "KernelClippedWarning", "compute_kernel", "render_kernel"]
 
@@ -36,9 +59,11 @@ SIDES = ("far", "near")
 SAMPLINGS = ("stratified", "independent")
 #: Default sample count of the sampling methods.
 DEFAULT_SAMPLES = 2**22
-#: Largest kernel frame (pixels a side) and disc diameter accepted.
-MAX_SIZE = 8192
-MAX_DIAMETER_PX = 20000.0
+#: Largest kernel frame (pixels a side), disc diameter and sample count accepted
+#: (bokehfit.validate.RANGES says why).
+MAX_SIZE = int(RANGES["kernel_size"].high)
+MAX_DIAMETER_PX = RANGES["diameter_px"].high
+MAX_SAMPLES = int(RANGES["kernel_samples"].high)
 
 
 class KernelClippedWarning(UserWarning):
@@ -49,7 +74,7 @@ class KernelClippedWarning(UserWarning):
 class Kernel:
     """A rendered kernel and how it was made."""
 
-    image: np.ndarray  #: float32 (size, size), sums to 1
+    image: np.ndarray  #: float32 (size, size), or (size, size, 3) red/green/blue with ``chromatic``; each channel sums to 1
     aperture: Aperture
     diameter_px: float
     side: str
@@ -60,102 +85,137 @@ class Kernel:
     device: str | None  #: adapter or GL renderer (None for exact)
     clipped_fraction: float  #: share of the disc's light outside the frame
     predicted_l1: float | None = None  #: expected L1 against exact, when planned from a tolerance
+    #: share of the unclipped aperture's light the vignetting passes at ``field_position`` (design.md §3b)
+    transmitted: float = 1.0
+    field_position: tuple[float, float] | None = None
+    #: stated L1 bound of a tabulated ``exact`` kernel (``rim``); None where exact to rounding or sampled
+    error_bound: float | None = None
 
 
 @dataclass(frozen=True)
 class KernelMethod:
     """A registry entry: one-time start-up, then the renderer."""
 
-    #: Opens what the method runs on (adapter, context, compiled shaders);
-    #: returns its description, or None for CPU-only methods.
-    prepare: Callable[[], str | None]
-    #: (aperture, signed scale, size, samples, seed, sampling) →
-    #: (unnormalised coverage, samples drawn or None).
-    render: Callable[..., tuple[np.ndarray, int | None]]
+    #: (adapter choice) → opens what the method runs on (adapter, context,
+    #: compiled shaders); returns its description, or None for CPU-only methods.
+    prepare: Callable[..., str | None]
+    #: (aperture as seen from its side, scale, size, samples, seed, sampling,
+    #: adapter choice, field position) → (unnormalised light, samples drawn or
+    #: None, stated L1 bound or None).
+    render: Callable[..., tuple[np.ndarray, int | None, float | None]]
 
 
-def _exact(aperture, scale, size, samples, seed, sampling):
-    return coverage(aperture, abs(scale), size, flip=scale < 0), None
+def _exact(aperture, scale, size, samples, seed, sampling, adapter=None, field_position=None):
+    if aperture.spec.tabulated:
+        return mask_coverage(aperture, scale, size), None, None
+    if aperture.rim != 0.0:
+        image, bound = rim_coverage(aperture, scale, size, field_position)
+        return image, None, bound
+    return coverage(aperture, scale, size, field_position=field_position), None, None
 
 
-def _prepare_mc():
+def _prepare_mc(adapter=None):
     from bokehfit.gpu import get_gpu
     from bokehfit.kernels.mc import prepare_pipeline
 
-    prepare_pipeline()
-    return get_gpu().describe()
+    prepare_pipeline(adapter)
+    return get_gpu(adapter).describe()
 
 
-def _mc(aperture, scale, size, samples, seed, sampling):
+def _mc(aperture, scale, size, samples, seed, sampling, adapter=None, field_position=None):
     from bokehfit.kernels.mc import mc_counts
 
-    counts, drawn = mc_counts(aperture, scale, size, samples, seed, sampling)
-    return counts.astype(np.float64), drawn
+    counts, drawn = mc_counts(aperture, scale, size, samples, seed, sampling, adapter=adapter, field_position=field_position)
+    return counts.astype(np.float64), drawn, None
 
 
-def _prepare_raster():
+def _prepare_raster(adapter=None):
     from bokehfit.kernels.raster import gl_renderer
 
     return f"{gl_renderer()} (OpenGL)"
 
 
-def _raster(aperture, scale, size, samples, seed, sampling):
+def _raster(aperture, scale, size, samples, seed, sampling, adapter=None, field_position=None):
     from bokehfit.kernels.raster import raster_counts
 
+    from bokehfit.kernels.raster import MAX_PASSES
+
+    if aperture.spec.tabulated:  # no outline to rasterise: the exact kernel (module notes)
+        return mask_coverage(aperture, scale, size), None, None
+
+    # A sub-pixel disc asks for more super-samples per pixel than the float32
+    # target counts exactly: it gets the most there are, MAX_PASSES, which
+    # already resolves its coverage far below float32 rounding.
     area_px = scale * scale
-    passes = max(1, math.ceil(samples / area_px))
-    counts, drawn = raster_counts(aperture, scale, size, passes, seed)
-    return counts.astype(np.float64), int(round(drawn * area_px))
+    passes = min(max(1, math.ceil(samples / area_px)), MAX_PASSES)
+    counts, drawn = raster_counts(aperture, scale, size, passes, seed, field_position=field_position)
+    return counts.astype(np.float64), int(round(drawn * area_px)), None
 
 
 METHODS: dict[str, KernelMethod] = {
-    "exact": KernelMethod(lambda: None, _exact),
+    "exact": KernelMethod(lambda adapter=None: None, _exact),
     "mc": KernelMethod(_prepare_mc, _mc),
     "raster": KernelMethod(_prepare_raster, _raster),
 }
 
 
-def _check_size(size) -> int:
-    if isinstance(size, bool) or not isinstance(size, (int, np.integer)) or not 1 <= size <= MAX_SIZE:
-        raise InputError(f"size must be an integer from 1 to {MAX_SIZE} (got {size!r})")
-    return int(size)
-
-
-def _clipped_fraction(aperture: Aperture, scale: float, size: int) -> float:
+def _clipped_fraction(aperture: Aperture, scale: float, size: int, field_position=None) -> float:
     """Share of the disc's area outside the frame (exact; the frame is centred on the light)."""
     half = size / 2.0
     if aperture.extent() * scale <= half:
         return 0.0
-    corners = quadrant_area(aperture, scale, [-half, half], [-half, half])
+    if aperture.spec.tabulated:  # the transmitted area is 1: what the frame holds is exact
+        return max(0.0, 1.0 - float(mask_coverage(aperture, scale, size).sum()) / (scale * scale))
+    outline = aperture.outline(field_position)
+    area = outline.area() * scale * scale
+    if not area > 0.0:
+        return 0.0
+    corners = quadrant_area(outline, scale, [-half, half], [-half, half])
     inside = corners[1, 1] - corners[0, 1] - corners[1, 0] + corners[0, 0]
-    return max(0.0, 1.0 - inside / (scale * scale))
+    return max(0.0, 1.0 - inside / area)
 
 
 def compute_kernel(
-    shape: str,
-    angle_deg: float,
-    diameter_px: float,
-    size: int,
+    shape: str | Aperture,
+    angle_deg: float | None = None,
+    diameter_px: float | None = None,
+    size: int | None = None,
     *,
     side: str = "far",
     method: str | None = None,
     samples: int | None = None,
     blades: int | None = None,
     aspect: float | None = None,
+    roundness: float | None = None,
+    squeeze: float | None = None,
+    vignetting=None,
+    rim: float | None = None,
+    chromatic=None,
+    mask=None,
+    field_position=None,
     sampling: str = "stratified",
     seed: int = 0,
     tolerance: float | None = None,
+    adapter: AdapterChoice | None = None,
 ) -> Kernel:
     """Render a kernel and report how: see :func:`render_kernel` for the parameters."""
-    aperture = make_aperture(shape, angle_deg, blades=blades, aspect=aspect)
-    diameter_px = check_positive("diameter_px", diameter_px)
-    if diameter_px > MAX_DIAMETER_PX:
-        raise InputError(f"diameter_px must be at most {MAX_DIAMETER_PX:g} (got {diameter_px!r})")
-    size = _check_size(size)
+    aperture = _aperture(shape, angle_deg, blades=blades, aspect=aspect, roundness=roundness, squeeze=squeeze,
+                         vignetting=vignetting, rim=rim, chromatic=chromatic, mask=mask)
+    if diameter_px is None or size is None:
+        raise InputError(f"{'diameter_px' if diameter_px is None else 'size'} is required")
+    diameter_px = check("diameter_px", diameter_px)
+    size = check("kernel_size", size, name="size")
     if side not in SIDES:
         raise InputError(f"side must be one of {', '.join(SIDES)} (got {side!r})")
     if method is not None and method not in METHODS:
         raise InputError(f"method must be one of {', '.join(METHODS)} (got {method!r})")
+    if field_position is not None:
+        pair = np.asarray(field_position, dtype=object)
+        if pair.shape != (2,):
+            raise InputError(f"field_position must be a pair (x, y) in half-diagonals, y up (got {field_position!r})")
+        field_position = tuple(float(check("field_position", v)) for v in pair)
+    elif aperture.vignetting is not None:
+        field_position = (0.0, 0.0)  # as Aperture.sample: the frame's centre
     predicted = None
     if tolerance is not None:
         if samples is not None:
@@ -165,26 +225,35 @@ def compute_kernel(
     method = method or "exact"
     if sampling not in SAMPLINGS:
         raise InputError(f"sampling must be one of {', '.join(SAMPLINGS)} (got {sampling!r})")
-    if samples is None:
-        samples = DEFAULT_SAMPLES
-    if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or not 1 <= samples <= 2**31:
-        raise InputError(f"samples must be an integer from 1 to 2**31 (got {samples!r})")
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed < 2**32:
-        raise InputError(f"seed must be an integer from 0 to 2**32 - 1 (got {seed!r})")
+    samples = DEFAULT_SAMPLES if samples is None else check("kernel_samples", samples, name="samples")
+    seed = check("seed", seed)
 
     # Equal-area convention (design.md §4): a unit-area shape scaled by d·√π/2
-    # has the area of a circle of diameter d. Near side: rotated by 180°.
+    # has the area of a circle of diameter d. Near side: Aperture.near (§3b).
     scale = diameter_px * math.sqrt(math.pi) / 2.0
-    signed_scale = scale if side == "far" else -scale
+    seen = aperture if side == "far" else aperture.near()
+    transmitted = 1.0 if seen.vignetting is None or field_position is None else seen.area(field_position)
+    if not transmitted > 0.0:
+        raise InputError(
+            f"vignetting stops all the light at field_position={field_position} (vignetting={aperture.vignetting})"
+        )
+    channels = [1.0] if seen.chromatic is None else [1.0 + seen.chromatic.red, 1.0, 1.0 + seen.chromatic.blue]
     start = time.perf_counter()
-    device = METHODS[method].prepare()
+    device = METHODS[method].prepare(adapter)
     prepared = time.perf_counter()
-    counts, drawn = METHODS[method].render(aperture, signed_scale, size, int(samples), int(seed), sampling)
+    images, clipped, drawn, bounds = [], 0.0, None, []
+    for channel_scale in channels:
+        counts, drawn, bound = METHODS[method].render(
+            seen, scale * channel_scale, size, int(samples), int(seed), sampling, adapter, field_position
+        )
+        total = counts.sum()
+        if not total > 0.0:
+            raise InputError(f"the disc falls outside the {size}×{size} frame (diameter_px={diameter_px:g})")
+        clipped = max(clipped, _clipped_fraction(seen, scale * channel_scale, size, field_position))
+        images.append(counts / total)
+        if bound is not None:
+            bounds.append(bound)
     elapsed = time.perf_counter() - prepared
-    total = counts.sum()
-    if not total > 0.0:
-        raise InputError(f"the disc falls outside the {size}×{size} frame (diameter_px={diameter_px:g})")
-    clipped = _clipped_fraction(aperture, scale, size)
     if clipped > 1e-9:
         warnings.warn(
             KernelClippedWarning(
@@ -193,33 +262,55 @@ def compute_kernel(
             ),
             stacklevel=3,
         )
-    image = (counts / total).astype(np.float32)
-    return Kernel(image, aperture, diameter_px, side, method, drawn, elapsed, prepared - start, device, clipped, predicted)
+    image = (images[0] if len(images) == 1 else np.stack(images, axis=-1)).astype(np.float32)
+    return Kernel(image, aperture, diameter_px, side, method, drawn, elapsed, prepared - start, device, clipped, predicted,
+                  transmitted, field_position, max(bounds) if bounds else None)
+
+
+def _aperture(shape, angle_deg, **features) -> Aperture:
+    """The aperture of :func:`compute_kernel`: given as one, or built from its parameters."""
+    given = {name: value for name, value in features.items() if value is not None}
+    if isinstance(shape, Aperture):
+        if angle_deg is not None or given:
+            named = ", ".join(["angle_deg"] * (angle_deg is not None) + list(given))
+            raise InputError(f"give an Aperture or its parameters, not both (got {named} with an Aperture)")
+        return shape
+    return make_aperture(shape, 0.0 if angle_deg is None else angle_deg, **given)
 
 
 def render_kernel(
-    shape: str,
-    angle_deg: float,
-    diameter_px: float,
-    size: int,
+    shape: str | Aperture,
+    angle_deg: float | None = None,
+    diameter_px: float | None = None,
+    size: int | None = None,
     *,
     side: str = "far",
     method: str | None = None,
     samples: int | None = None,
     blades: int | None = None,
     aspect: float | None = None,
+    roundness: float | None = None,
+    squeeze: float | None = None,
+    vignetting=None,
+    rim: float | None = None,
+    chromatic=None,
+    mask=None,
+    field_position=None,
     sampling: str = "stratified",
     seed: int = 0,
     tolerance: float | None = None,
+    adapter: AdapterChoice | None = None,
 ) -> np.ndarray:
-    """Point-light defocus kernel: float32 (size, size), summing to 1.
+    """Point-light defocus kernel: float32 (size, size) (or (size, size, 3) with ``chromatic``), summing to 1.
 
     Parameters
     ----------
-    shape : str
-        Aperture shape (see ``bokehfit.apertures.SHAPES``).
+    shape : str or Aperture
+        Aperture shape (see ``bokehfit.apertures.SHAPES``), or a whole
+        :class:`~bokehfit.apertures.Aperture` (then give no angle or feature;
+        pass ``diameter_px`` and ``size`` by keyword).
     angle_deg : float
-        Counter-clockwise rotation of the aperture, degrees (design.md §2).
+        Counter-clockwise rotation of the aperture, degrees (design.md §2); default 0.
     diameter_px : float
         Diameter of the circle with the disc's area, pixels (equal-area convention).
     size : int
@@ -235,6 +326,16 @@ def render_kernel(
         Point samples over the disc for ``mc`` and ``raster`` (default 2²²).
     blades, aspect : optional
         Blade count of an ``ngon``; width/height of a ``slit``.
+    roundness, squeeze, vignetting, rim, chromatic : optional
+        The real-lens features of design.md §3b (see
+        :func:`bokehfit.apertures.make_aperture`; defaults reproduce §3).
+    mask : MaskTable, path or 2-D array, optional
+        The transmission image of shape ``"mask"`` (design.md §3b).
+    field_position : (float, float), optional
+        The disc's position from the image centre in half-diagonals, y up:
+        where the vignetting cuts it (default the centre, (0, 0)). The
+        kernel is renormalised; :attr:`Kernel.transmitted` from
+        :func:`compute_kernel` is the share of light that passed.
     sampling : {"stratified", "independent"}
         Sample pattern of ``mc`` (``raster`` is always stratified).
     seed : int
@@ -243,11 +344,15 @@ def render_kernel(
         Largest L1 error against ``exact`` wanted: the method (unless given)
         and the sample count are chosen from the measured convergence models
         (:mod:`bokehfit.kernels.accuracy`) to meet it at the least cost.
+    adapter : AdapterChoice, optional
+        The WebGPU adapter of ``mc`` (:func:`bokehfit.gpu.get_gpu`); the best one found by default.
 
     Returns
     -------
-    ndarray of shape (size, size), float32
-        Sums to 1. If the disc is larger than the frame, the kernel is clipped,
+    ndarray of shape (size, size) or (size, size, 3), float32
+        Sums to 1 (each of red, green, blue with ``chromatic``; the red and
+        blue discs are the green one scaled by 1 + red, 1 + blue; a near
+        disc shows −red, −blue and −rim). If the disc is larger than the frame, the kernel is clipped,
         a :class:`KernelClippedWarning` says how much light was lost, and the
         visible part is renormalised.
 
@@ -272,7 +377,15 @@ def render_kernel(
         samples=samples,
         blades=blades,
         aspect=aspect,
+        roundness=roundness,
+        squeeze=squeeze,
+        vignetting=vignetting,
+        rim=rim,
+        chromatic=chromatic,
+        mask=mask,
+        field_position=field_position,
         sampling=sampling,
         seed=seed,
         tolerance=tolerance,
+        adapter=adapter,
     ).image

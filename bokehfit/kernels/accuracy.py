@@ -27,8 +27,9 @@ from dataclasses import dataclass
 
 from bokehfit.apertures import Aperture
 from bokehfit.errors import InputError
+from bokehfit.validate import RANGES, check
 
-__all__ = ["Plan", "plan_kernel", "predicted_l1"]
+__all__ = ["MIN_TOLERANCE", "Plan", "plan_kernel", "predicted_l1"]
 
 #: (coefficient, exponent) of the error models above.
 _MC_STRATIFIED = (1.0, 0.74)
@@ -40,8 +41,11 @@ _MC_PER_SAMPLE = 2.2e-8
 _RASTER_PER_PIXEL_PASS = 1e-9
 _MC_FIXED = 5e-3
 _RASTER_FIXED = 1e-2
-#: Sample counts the planner may choose.
-_MIN_SAMPLES, _MAX_SAMPLES = 1_000, 2**31
+#: Sample counts the planner may choose (the most that a kernel takes).
+_MIN_SAMPLES, _MAX_SAMPLES = 1_000, int(RANGES["kernel_samples"].high)
+#: Smallest L1 tolerance any method reaches: the kernel is float32 and sums to
+#: 1, so rounding its values alone moves it by up to 2⁻²⁴ in L1.
+MIN_TOLERANCE = 2.0**-24
 
 
 @dataclass(frozen=True)
@@ -80,7 +84,7 @@ def _samples_for(method: str, sampling: str, diameter_px: float, tolerance: floa
 
 def _time(method: str, aperture: Aperture, diameter_px: float, size: int, samples: int | None) -> float:
     if method == "exact":
-        edges = 4 if aperture.vertices() is None else len(aperture.vertices())
+        edges = 4 if aperture.is_circle else len(aperture.vertices())
         return _EXACT_PER_CELL_EDGE * (size + 1) ** 2 * edges
     if method == "raster":
         passes = max(1, math.ceil(samples / (math.pi * diameter_px**2 / 4.0)))
@@ -90,8 +94,18 @@ def _time(method: str, aperture: Aperture, diameter_px: float, size: int, sample
 
 def plan_kernel(aperture: Aperture, diameter_px: float, size: int, tolerance: float, method: str | None = None) -> Plan:
     """The cheapest way (or, with ``method``, the fewest samples) to reach L1 ≤ ``tolerance``."""
-    if not (isinstance(tolerance, (int, float)) and math.isfinite(tolerance) and tolerance > 0):
-        raise InputError(f"tolerance must be a positive number (got {tolerance!r})")
+    tolerance = check("tolerance", tolerance)
+    if tolerance < MIN_TOLERANCE:
+        raise InputError(
+            f"tolerance must be at least {MIN_TOLERANCE:.3g}, the float32 rounding of a kernel that sums to 1 (got {tolerance!r})"
+        )
+    if method in ("mc", "raster"):
+        smallest = predicted_l1(method, "stratified", diameter_px, _MAX_SAMPLES)
+        if tolerance < smallest:
+            raise InputError(
+                f"tolerance must be at least {smallest:.3g} for method {method!r} on a {diameter_px:g}-px disc "
+                f"({_MAX_SAMPLES} samples, the most it takes; method 'exact' reaches any tolerance) (got {tolerance!r})"
+            )
     options = []
     for name, sampling in (("exact", "stratified"), ("mc", "stratified"), ("raster", "stratified")):
         if method is not None and name != method:
@@ -102,5 +116,5 @@ def plan_kernel(aperture: Aperture, diameter_px: float, size: int, tolerance: fl
             continue
         options.append(Plan(name, sampling, samples, error, _time(name, aperture, diameter_px, size, samples)))
     if not options:
-        raise InputError(f"no sample count within 2**31 reaches tolerance {tolerance:g} with method {method!r}")
+        raise InputError(f"no sample count within {_MAX_SAMPLES} reaches tolerance {tolerance:g} with method {method!r}")
     return min(options, key=lambda plan: plan.predicted_time_s)

@@ -6,6 +6,14 @@ instance shifts the shape by a sub-pixel offset taken from a jittered m × m
 grid, and additive blending into a float32 target accumulates the coverage
 counts. This is super-sampling with an accumulation buffer: memory stays at
 size², whatever the sample count, and one instanced draw call does it all.
+
+The fan is drawn from the unclipped outline: exact corners for straight
+edges, arcs (rounded blades, a squeezed circle) as chords within
+``Aperture.vertices``' 1e-6 of unit-area units (1e-6·scale px). Each fan
+triangle (centre, a, b) carries the radial fraction ρ of design.md §3b as a
+vertex attribute (0 at the centre, 1 on the outline): it is exactly linear
+over the triangle, so every fragment gets its ``rim`` weight 1 + rim·(2ρ² − 1)
+exactly. Fragments outside the vignetting barrel's circle are discarded.
 """
 
 from __future__ import annotations
@@ -15,8 +23,8 @@ from functools import lru_cache
 
 import numpy as np
 
-from bokehfit.apertures import Aperture
-from bokehfit.errors import GPUUnavailableError
+from bokehfit.apertures import Aperture, aperture_rows_to_image
+from bokehfit.errors import GPUUnavailableError, InputError
 from bokehfit.gpu.runtime import use_headless_egl
 
 __all__ = ["raster_counts", "gl_renderer"]
@@ -27,12 +35,15 @@ MAX_PASSES = 2**22
 _VERTEX = """
 #version 330
 in vec2 position;   // aperture frame, pixels, relative to the light
+in float fraction;  // radial fraction: 0 at the centre, 1 on the outline
 in vec2 offset;     // per instance: minus the sub-pixel sample position
 uniform float size;
 out vec2 frame_position;
+out float radial;
 void main() {
     vec2 p = position + offset;
     frame_position = position;  // the fragment relative to the shifted shape's centre
+    radial = fraction;
     // Pixel-centre coordinates: the light at (size-1)/2; GL rows run upward.
     gl_Position = vec4((p + 0.5 * (size - 1.0) + 0.5) / size * 2.0 - 1.0, 0.0, 1.0);
 }
@@ -41,13 +52,25 @@ void main() {
 _FRAGMENT = """
 #version 330
 in vec2 frame_position;
+in float radial;
 uniform float disc_radius;  // > 0: draw the disc inscribed in the quad
+uniform float rim;          // intensity profile (design.md 3b)
+uniform vec3 barrel;        // vignetting circle: centre .xy, radius .z (0: none), pixels
 out float coverage;
 void main() {
-    if (disc_radius > 0.0 && dot(frame_position, frame_position) > disc_radius * disc_radius) {
+    float rho = radial;
+    if (disc_radius > 0.0) {
+        float r2 = dot(frame_position, frame_position);
+        if (r2 > disc_radius * disc_radius) {
+            discard;
+        }
+        rho = sqrt(r2) / disc_radius;
+    }
+    vec2 cut = frame_position - barrel.xy;
+    if (barrel.z > 0.0 && dot(cut, cut) > barrel.z * barrel.z) {
         discard;
     }
-    coverage = 1.0;
+    coverage = 1.0 + rim * (2.0 * rho * rho - 1.0);
 }
 """
 
@@ -74,33 +97,51 @@ def gl_renderer() -> str:
 
 
 def _triangles(aperture: Aperture, scale: float) -> tuple[np.ndarray, float]:
-    """Triangle list of the scaled outline, and the disc radius (0 for polygons)."""
+    """Triangle list (x, y, radial fraction) of the scaled unclipped outline, and the disc radius (0 for polygons)."""
     vertices = aperture.vertices()
     if vertices is None:
         r = abs(scale) / math.sqrt(math.pi)
         quad = np.array([[-r, -r], [r, -r], [r, r], [-r, -r], [r, r], [-r, r]])
-        return quad, r
-    fan = vertices * scale
-    centre = np.zeros((len(fan), 2))
-    return np.stack([centre, fan, np.roll(fan, -1, axis=0)], axis=1).reshape(-1, 2), 0.0
+        return np.column_stack([quad, np.zeros(6)]), r
+    fan = np.column_stack([vertices * scale, np.ones(len(vertices))])
+    centre = np.zeros((len(fan), 3))
+    return np.stack([centre, fan, np.roll(fan, -1, axis=0)], axis=1).reshape(-1, 3), 0.0
 
 
-def raster_counts(aperture: Aperture, scale: float, size: int, passes: int, seed: int) -> tuple[np.ndarray, int]:
-    """Super-sample counts on the size × size grid, and the passes drawn (m², m = ⌈√passes⌉)."""
+def raster_counts(
+    aperture: Aperture, scale: float, size: int, passes: int, seed: int, field_position=None
+) -> tuple[np.ndarray, int]:
+    """Super-sample counts (rim-weighted) on the size × size grid, and the passes drawn (m², m = ⌈√passes⌉).
+
+    ``field_position`` places the vignetting cut (design.md §3b; default the frame's centre).
+    """
     strata = math.isqrt(passes - 1) + 1
     drawn = strata * strata
     if drawn > MAX_PASSES:
-        raise ValueError(f"samples per pixel must be at most {MAX_PASSES} for method 'raster' (got {passes})")
+        raise InputError(f"samples per pixel must be at most {MAX_PASSES} for method 'raster' (got {passes})")
     ctx, program = _context()
+    # The float32 target is one texture and one viewport: both have the context's limits.
+    largest = min(ctx.info["GL_MAX_TEXTURE_SIZE"], *ctx.info["GL_MAX_VIEWPORT_DIMS"])
+    if size > largest:
+        raise InputError(f"size must be at most {largest} for method 'raster' on {gl_renderer()}, its largest texture (got {size})")
     rng = np.random.default_rng(seed)
     cells = np.stack(np.meshgrid(np.arange(strata), np.arange(strata), indexing="ij"), axis=-1).reshape(-1, 2)
     sample_positions = (cells + rng.random((drawn, 2))) / strata - 0.5
     triangles, disc_radius = _triangles(aperture, scale)
     program["size"].value = float(size)
     program["disc_radius"].value = disc_radius
+    program["rim"].value = aperture.rim
+    barrel = (0.0, 0.0, 0.0)
+    if aperture.vignetting is not None:
+        from bokehfit.apertures import CIRCLE_RADIUS
+
+        q = np.zeros(2) if field_position is None else np.asarray(field_position, dtype=np.float64)
+        cx, cy = abs(scale) * aperture.vignetting.shift * CIRCLE_RADIUS * q
+        barrel = (float(cx), float(cy), abs(scale) * aperture.vignetting.radius * CIRCLE_RADIUS)
+    program["barrel"].value = barrel
     vertex_buffer = ctx.buffer(triangles.astype("f4").tobytes())
     offset_buffer = ctx.buffer((-sample_positions).astype("f4").tobytes())
-    vao = ctx.vertex_array(program, [(vertex_buffer, "2f", "position"), (offset_buffer, "2f/i", "offset")])
+    vao = ctx.vertex_array(program, [(vertex_buffer, "2f 1f", "position", "fraction"), (offset_buffer, "2f/i", "offset")])
     target = ctx.texture((size, size), 1, dtype="f4")
     framebuffer = ctx.framebuffer(color_attachments=[target])
     try:
@@ -114,4 +155,4 @@ def raster_counts(aperture: Aperture, scale: float, size: int, passes: int, seed
     finally:
         for resource in (vao, vertex_buffer, offset_buffer, framebuffer, target):
             resource.release()
-    return data.reshape(size, size)[::-1].copy(), drawn
+    return aperture_rows_to_image(data.reshape(size, size)), drawn  # the framebuffer's rows run up in y

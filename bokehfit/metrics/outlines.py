@@ -201,11 +201,10 @@ def aperture_outline(aperture: Aperture, points: int = DEFAULT_POINTS) -> np.nda
         raise InputError(f"aperture must be an Aperture from make_aperture (got {type(aperture).__name__})")
     if isinstance(points, bool) or not isinstance(points, (int, np.integer)) or points < 3:
         raise InputError(f"points must be an integer of at least 3 (got {points!r})")
-    vertices = aperture.vertices()
-    if vertices is None:
+    if aperture.is_circle:
         t = np.radians(aperture.angle_deg) + 2.0 * np.pi * np.arange(points) / points
         return CIRCLE_RADIUS * np.stack([np.cos(t), np.sin(t)], axis=-1)
-    return densify(vertices, int(points))
+    return densify(aperture.vertices(), int(points))
 
 
 #: Passes of :func:`intersection_area` that add the crossings of the two

@@ -1,4 +1,9 @@
-"""Draw found discs on the photo: each outline, coloured by use, with its index."""
+"""Draw found discs on the photo: each outline, coloured by use, with its index.
+
+One vocabulary for ``discs`` and ``compare``: a disc is *usable* when it is clean
+enough to fit (resolvable, not saturated, cut by the frame or overlapping),
+*used* when the fit actually used it (``compare`` only), and *rejected* otherwise.
+"""
 
 from __future__ import annotations
 
@@ -7,32 +12,69 @@ import numpy as np
 
 from bokehfit.discs import Disc
 
-__all__ = ["draw_disc_overlay", "USED_BGR", "FLAGGED_BGR"]
+__all__ = ["draw_disc_overlay", "disc_role", "ROLE_BGR", "USED_BGR", "USABLE_BGR", "FLAGGED_BGR", "LABEL_HEIGHT_REL"]
 
-#: Outline colours (BGR): discs clean enough to fit, and discs left out (saturated,
-#: clipped by the frame, overlapping, or too small to show a shape).
-USED_BGR = (80, 220, 60)
-FLAGGED_BGR = (40, 90, 255)
+#: Outline colours (BGR), distinct for colour-blind readers too (Okabe–Ito palette):
+#: discs used in the fit (bluish green), usable but not used (sky blue), and
+#: rejected (vermilion: saturated, cut by the frame, overlapping or too small).
+USED_BGR = (115, 158, 0)
+USABLE_BGR = (233, 180, 86)
+FLAGGED_BGR = (0, 94, 213)
+ROLE_BGR = {"used": USED_BGR, "usable": USABLE_BGR, "rejected": FLAGGED_BGR}
+#: Label height as a fraction of the drawn image's longer side (about 14 px on a 1600-px overview).
+LABEL_HEIGHT_REL = 0.009
 #: Sub-pixel precision of the drawn outlines (OpenCV fixed-point shift).
 _SHIFT = 4
 
 
-def draw_disc_overlay(display_rgb: np.ndarray, discs: list[Disc]) -> np.ndarray:
+def disc_role(disc: Disc, used: set[int] | None = None) -> str:
+    """``used``, ``usable`` or ``rejected`` (``used`` only when the fitted indices are given)."""
+    if used is not None and disc.index in used:
+        return "used"
+    return "usable" if disc.usable else "rejected"
+
+
+def draw_disc_overlay(
+    display_rgb: np.ndarray,
+    discs: list[Disc],
+    used: set[int] | None = None,
+    max_side: int | None = None,
+    labels: dict[int, str] | None = None,
+) -> np.ndarray:
     """BGR image (for cv2.imencode) of the photo with every disc's outline and index.
 
-    Line widths and labels scale with the image, so they stay visible on a
-    24-megapixel photo viewed whole.
+    Parameters
+    ----------
+    display_rgb : ndarray of shape (M, N, 3), uint8
+        The photo as displayed.
+    discs : list of Disc
+        Outlines in the photo's pixel coordinates.
+    used : set of int, optional
+        Indices of the discs the fit used; without it discs are usable or rejected.
+    max_side : int, optional
+        Shrink the photo to this longer side first, so that lines and labels are
+        sized for the picture as shown, not for the full-size photo.
+    labels : dict of int to str, optional
+        Text after a disc's index (``compare``: the light's distance, ``"3: 1.92 m"``).
     """
     canvas = cv2.cvtColor(np.ascontiguousarray(display_rgb), cv2.COLOR_RGB2BGR)
+    scale = 1.0
+    if max_side is not None and max(canvas.shape[:2]) > max_side:
+        scale = max_side / max(canvas.shape[:2])
+        canvas = cv2.resize(canvas, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
     height, width = canvas.shape[:2]
-    thickness = max(1, round(max(height, width) / 1500))
-    font_scale = max(0.4, max(height, width) / 3000)
+    thickness = max(1, round(max(height, width) / 1000))
+    # FONT_HERSHEY_SIMPLEX is about 22 px tall at scale 1.
+    font_scale = max(0.35, LABEL_HEIGHT_REL * max(height, width) / 22.0)
+    labels = labels or {}
     for disc in discs:
-        colour = USED_BGR if disc.usable else FLAGGED_BGR
-        points = np.round((disc.outline_xy + 0.5) * (1 << _SHIFT)).astype(np.int32)
+        colour = ROLE_BGR[disc_role(disc, used)]
+        text = f"{disc.index}: {labels[disc.index]}" if disc.index in labels else str(disc.index)  # Hershey fonts are ASCII
+        outline = (disc.outline_xy + 0.5) * scale - 0.5
+        points = np.round((outline + 0.5) * (1 << _SHIFT)).astype(np.int32)
         cv2.polylines(canvas, [points], True, colour, thickness, cv2.LINE_AA, shift=_SHIFT)
-        x = int(disc.outline_xy[:, 0].max()) + 2 * thickness
-        y = int(disc.outline_xy[:, 1].min()) + int(12 * font_scale)
-        cv2.putText(canvas, str(disc.index), (x, y), cv2.FONT_HERSHEY_SIMPLEX, font_scale, (0, 0, 0), 3 * thickness, cv2.LINE_AA)
-        cv2.putText(canvas, str(disc.index), (x, y), cv2.FONT_HERSHEY_SIMPLEX, font_scale, colour, thickness, cv2.LINE_AA)
+        x = int(outline[:, 0].max()) + 2 * thickness
+        y = int(outline[:, 1].min()) + int(22 * font_scale)
+        cv2.putText(canvas, text, (x, y), cv2.FONT_HERSHEY_SIMPLEX, font_scale, (0, 0, 0), 3 * thickness, cv2.LINE_AA)
+        cv2.putText(canvas, text, (x, y), cv2.FONT_HERSHEY_SIMPLEX, font_scale, colour, thickness, cv2.LINE_AA)
     return canvas

@@ -26,7 +26,8 @@ from bokehfit.scene.cornell import cornell_box
 from bokehfit.scene.geometry import Box, Material, Pose, Quad, Scene, Sphere
 from bokehfit.scene.images import RENDER_FORMATS, tone_map_srgb8, write_render
 from bokehfit.scene.points import DEFAULT_DEPTHS_M, PointLight, PointScene, parse_depths, points_scene
-from bokehfit.scene.renderer import RenderResult, render_scene, tile_plan, total_work
+from bokehfit.scene.renderer import QUICK_WORK, RenderResult, estimate_render_s, render_scene, tile_plan, total_work
+from bokehfit.validate import check
 
 __all__ = [
     "SCENES",
@@ -48,6 +49,7 @@ __all__ = [
     "SENSOR_WIDTH_MM",
     "build_scene",
     "cornell_box",
+    "estimate_render_s",
     "make_lens",
     "make_settings",
     "parse_depths",
@@ -101,6 +103,11 @@ def render(
     focus_distance_m: float | None = None,
     blades: int | None = None,
     aspect: float | None = None,
+    roundness: float = 0.0,
+    squeeze: float = 1.0,
+    vignetting=None,
+    rim: float = 0.0,
+    chromatic=None,
     spp: int = 64,
     width: int = 512,
     height: int = 512,
@@ -110,6 +117,7 @@ def render(
     sensor_width_mm: float = SENSOR_WIDTH_MM,
     max_tile_pixels: int | None = None,
     progress: Callable[[int], None] | None = None,
+    max_time_s: float | None = None,
 ) -> RenderResult:
     """Validate the parameters and render a scene (by name, or a Scene/PointScene).
 
@@ -119,6 +127,10 @@ def render(
         ``"cornell"`` or ``"points"`` (see ``SCENES``), or a scene built in Python.
     shape, angle_deg, blades, aspect : optional
         The aperture (``bokehfit.apertures.make_aperture``).
+    roundness, squeeze, vignetting, rim, chromatic : optional
+        Its real-lens features (design.md §3b; ``make_aperture`` takes them
+        the same way): rounded blades, anamorphic squeeze, cat-eye vignetting
+        ``{radius, shift}``, intensity profile, longitudinal colour ``{red, blue}``.
     fstop : float
         Equal-area f-stop: the aperture has the area of a circle of diameter f/N.
     focus_distance_m : float, optional
@@ -137,6 +149,10 @@ def render(
         Most pixels per tile (default: the adapter's limit, at most 2²²).
     progress : callable, optional
         Called with the number of samples finished, now and then.
+    max_time_s : float, optional
+        Refuse (``InputError``) a render of more than ``QUICK_WORK`` samples
+        whose estimated time (:func:`estimate_render_s`) exceeds this many
+        seconds; default no bound.
 
     Returns
     -------
@@ -161,8 +177,22 @@ def render(
         focus_distance_m=built.default_focus_m if focus_distance_m is None else focus_distance_m,
         blades=blades,
         aspect=aspect,
+        roundness=roundness,
+        squeeze=squeeze,
+        vignetting=vignetting,
+        rim=rim,
+        chromatic=chromatic,
         focal_length_mm=focal_length_mm,
         sensor_width_mm=sensor_width_mm,
     )
     settings = make_settings(width, height, spp, seed, max_tile_pixels=max_tile_pixels)
+    if max_time_s is not None:
+        max_time_s = check("max_time_s", max_time_s)
+        if total_work(built, lens, settings) > QUICK_WORK:
+            estimate, _ = estimate_render_s(built, lens, settings)
+            if estimate > max_time_s:
+                raise InputError(
+                    f"max_time_s: the render would take about {estimate:.3g} s, more than {max_time_s:g} s "
+                    "(lower spp or the image size, or raise max_time_s)"
+                )
     return render_scene(built, lens, settings, progress)

@@ -32,9 +32,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bokehfit.apertures import Aperture, make_aperture
-from bokehfit.errors import InputError, check_positive
+from bokehfit.apertures import Aperture, Chromatic, Vignetting, make_aperture
+from bokehfit.errors import InputError
 from bokehfit.optics import coc_mm
+from bokehfit.validate import RANGES, check
 
 __all__ = [
     "Lens",
@@ -49,15 +50,12 @@ __all__ = [
 #: Default focal length and sensor width (full frame).
 FOCAL_LENGTH_MM = 35.0
 SENSOR_WIDTH_MM = 36.0
-#: f-stops outside this range are refused: below it the aperture is wider than
-#: any scene here; above it the lens is a pinhole for every purpose.
-FSTOP_RANGE = (0.1, 10000.0)
-#: Focus distances outside this range (m) are refused (f32 rays lose precision).
-FOCUS_RANGE_M = (1e-3, 1e6)
-#: Longest image side: pixel indices, the RNG stream and f32 pixel positions stay exact.
-MAX_IMAGE_SIDE = 16384
-#: Most samples per pixel (the sample index is a u32 and the count is kept in f32).
-MAX_SPP = 2**24
+#: Accepted f-stops and focus distances (m); bokehfit.validate.RANGES gives the reasons.
+FSTOP_RANGE = (RANGES["fstop"].low, RANGES["fstop"].high)
+FOCUS_RANGE_M = (RANGES["focus_distance_m"].low, RANGES["focus_distance_m"].high)
+#: Longest image side and most samples per pixel (see bokehfit.validate.RANGES).
+MAX_IMAGE_SIDE = int(RANGES["image_side_px"].high)
+MAX_SPP = int(RANGES["spp"].high)
 
 
 @dataclass(frozen=True)
@@ -69,6 +67,11 @@ class Lens:
     focus_distance_m: float
     focal_length_mm: float = FOCAL_LENGTH_MM
     sensor_width_mm: float = SENSOR_WIDTH_MM
+
+    def __post_init__(self) -> None:
+        if self.aperture.spec.tabulated:
+            # The renderers bind no mask table (kernels do): refuse rather than sample a stub.
+            raise InputError(f"the renderer does not sample tabulated apertures yet (got shape {self.aperture.shape!r})")
 
     @property
     def aperture_diameter_mm(self) -> float:
@@ -103,6 +106,11 @@ class Lens:
             angle_deg=a.angle_deg,
             blades=a.blades,
             aspect=a.aspect,
+            roundness=a.roundness,
+            squeeze=a.squeeze,
+            vignetting=None if a.vignetting is None else dict(radius=a.vignetting.radius, shift=a.vignetting.shift),
+            rim=a.rim,
+            chromatic=None if a.chromatic is None else dict(red=a.chromatic.red, blue=a.chromatic.blue),
             fstop=self.fstop,
             focus_distance_m=self.focus_distance_m,
             focal_length_mm=self.focal_length_mm,
@@ -120,10 +128,20 @@ def make_lens(
     focus_distance_m: float,
     blades: int | None = None,
     aspect: float | None = None,
+    roundness: float = 0.0,
+    squeeze: float = 1.0,
+    vignetting: Vignetting | dict | None = None,
+    rim: float = 0.0,
+    chromatic: Chromatic | dict | None = None,
     focal_length_mm: float = FOCAL_LENGTH_MM,
     sensor_width_mm: float = SENSOR_WIDTH_MM,
 ) -> Lens:
     """Validate the lens parameters and build a :class:`Lens`.
+
+    The numbers must lie in the ranges of ``bokehfit.validate.RANGES``, and
+    the focus distance beyond the focal length. ``roundness``, ``squeeze``,
+    ``vignetting``, ``rim`` and ``chromatic`` are the real-lens features of
+    design.md §3b, as :func:`bokehfit.apertures.make_aperture` takes them.
 
     Raises
     ------
@@ -136,17 +154,19 @@ def make_lens(
     >>> round(lens.aperture_diameter_mm, 2)
     25.0
     """
-    aperture = make_aperture(shape, angle_deg, blades=blades, aspect=aspect)
-    fstop = check_positive("fstop", fstop)
-    low, high = FSTOP_RANGE
-    if not low <= fstop <= high:
-        raise InputError(f"fstop must be between {low:g} and {high:g} (got {fstop!r})")
-    focus = check_positive("focus_distance_m", focus_distance_m)
-    low, high = FOCUS_RANGE_M
-    if not low <= focus <= high:
-        raise InputError(f"focus_distance_m must be between {low:g} and {high:g} m (got {focus_distance_m!r})")
-    focal = check_positive("focal_length_mm", focal_length_mm)
-    sensor = check_positive("sensor_width_mm", sensor_width_mm)
+    aperture = make_aperture(
+        shape, angle_deg, blades=blades, aspect=aspect, roundness=roundness, squeeze=squeeze,
+        vignetting=vignetting, rim=rim, chromatic=chromatic,
+    )
+    fstop = check("fstop", fstop)
+    focus = check("focus_distance_m", focus_distance_m)
+    focal = check("focal_length_mm", focal_length_mm)
+    sensor = check("sensor_width_mm", sensor_width_mm)
+    if focus * 1000.0 <= focal:
+        raise InputError(
+            f"focus_distance_m must be longer than the focal length ({focal:g} mm): nothing can be focused closer "
+            f"(got {focus_distance_m!r})"
+        )
     return Lens(aperture, fstop, focus, focal, sensor)
 
 
@@ -189,10 +209,10 @@ def make_settings(
     mirror_nee: bool = False,
 ) -> RenderSettings:
     """Validate and build :class:`RenderSettings` (``InputError`` names a bad parameter)."""
-    width = _check_int("width", width, 1, MAX_IMAGE_SIDE)
-    height = _check_int("height", height, 1, MAX_IMAGE_SIDE)
-    spp = _check_int("spp", spp, 1, MAX_SPP)
-    seed = _check_int("seed", seed, 0, 2**32 - 1)
+    width = check("image_side_px", width, name="width")
+    height = check("image_side_px", height, name="height")
+    spp = check("spp", spp)
+    seed = check("seed", seed)
     max_depth = _check_int("max_depth", max_depth, 1, 1024)
     rr_depth = _check_int("rr_depth", rr_depth, 1, 1024)
     if max_tile_pixels is not None:

@@ -21,6 +21,7 @@ import math
 from dataclasses import dataclass
 
 from bokehfit.errors import InputError
+from bokehfit.validate import check
 
 __all__ = ["PointLight", "PointScene", "points_scene", "parse_depths", "DEFAULT_DEPTHS_M"]
 
@@ -79,7 +80,5 @@ def parse_depths(text: str) -> tuple[float, ...]:
             value = float(part)
         except ValueError:
             raise InputError(f"light depths must be numbers in metres or inf, comma-separated (got {text!r})") from None
-        if math.isnan(value) or value <= 0.0:
-            raise InputError(f"light depths must be greater than 0 or inf (got {part.strip()!r})")
-        depths.append(value)
+        depths.append(check("light_distance_m", value, name="light depths"))
     return tuple(depths)

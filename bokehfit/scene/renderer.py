@@ -9,26 +9,37 @@ Two renderers, chosen by the scene's type:
 ``splatting`` (:class:`~bokehfit.scene.points.PointScene`, ``shaders/points.wgsl``)
     Each point light's aperture samples are counted in the pixels they reach,
     then added to the accumulation buffer with the light's weight. A light gets
-    ``spp`` samples per pixel of its disc (at least ``spp``), on a jittered grid.
+    ``spp`` samples per pixel of its disc (at least ``spp``), on a jittered grid;
+    with longitudinal colour (design.md §3b) its red, green and blue discs
+    differ in size and are splatted one after the other.
+
+Both send the lens's whole aperture (:meth:`bokehfit.apertures.Aperture.shader_params`)
+in the uniform; camera.wgsl samples it with ``sample_aperture_params``.
 
 Images larger than the adapter allows in one binding (``max-storage-buffer-binding-size``,
 16 bytes a pixel) or one dispatch (``max-compute-workgroups-per-dimension``) are
 rendered tile by tile. The random streams depend on the pixel's place in the
 whole image, so tiling does not change the result.
+
+Long renders are estimated before they start (:func:`estimate_render_s`): a
+trial render of the same scene, smaller and with fewer samples, grown until
+it lasts long enough to time, gives the adapter's rate, and the total work
+divided by it the time.
 """
 
 from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 from typing import Callable
 
 import numpy as np
 
-from bokehfit.gpu import get_gpu
-from bokehfit.gpu.compute import bind_buffers, dispatch
+from bokehfit.apertures import APERTURE_PARAM_FIELDS, CHANNELS, image_to_aperture
+from bokehfit.gpu import AdapterChoice, get_gpu
+from bokehfit.gpu.compute import Binding, ComputeInterface, dispatch
 from bokehfit.gpu.layout import Struct
 from bokehfit.gpu.shaders import load_shader
 from bokehfit.scene.camera import Lens, RenderSettings
@@ -36,44 +47,42 @@ from bokehfit.scene.geometry import BOX, MATERIAL, QUAD, SPHERE, Pose, Scene
 from bokehfit.scene.wgsl import scene_wgsl
 from bokehfit.scene.points import PointScene
 
-__all__ = ["RENDER_PARAMS", "POINT_PARAMS", "RenderResult", "pathtrace_source", "render_params", "render_scene", "set_tile", "tile_plan", "total_work", "DEFAULT_MAX_TILE_PIXELS"]
+__all__ = ["RENDER_PARAMS", "POINT_PARAMS", "RenderResult", "lens_aperture_wgsl", "pathtrace_source", "render_params", "render_scene", "set_tile", "tile_plan", "total_work", "estimate_render_s", "DEFAULT_MAX_TILE_PIXELS", "QUICK_WORK"]
 
-RENDER_PARAMS = Struct(
-    "RenderParams",
-    (
-        ("image_width", "u32"),
-        ("image_height", "u32"),
-        ("tile_x", "u32"),
-        ("tile_y", "u32"),
-        ("tile_width", "u32"),
-        ("tile_height", "u32"),
-        ("sample_index", "u32"),
-        ("seed", "u32"),
-        ("shape", "u32"),
-        ("blades", "u32"),
-        ("aspect", "f32"),
-        ("cos_angle", "f32"),
-        ("sin_angle", "f32"),
-        ("aperture_scale", "f32"),
-        ("focus_distance", "f32"),
-        ("tan_half_x", "f32"),
-        ("tan_half_y", "f32"),
-        ("position_x", "f32"),
-        ("position_y", "f32"),
-        ("position_z", "f32"),
-        ("right_x", "f32"),
-        ("right_y", "f32"),
-        ("right_z", "f32"),
-        ("up_x", "f32"),
-        ("up_y", "f32"),
-        ("up_z", "f32"),
-        ("forward_x", "f32"),
-        ("forward_y", "f32"),
-        ("forward_z", "f32"),
-        ("max_depth", "u32"),
-        ("rr_depth", "u32"),
-    ),
+#: RenderParams = the image and tile, the lens's aperture (the fields of the WGSL
+#: ``ApertureParams``, :data:`bokehfit.apertures.APERTURE_PARAM_FIELDS`, which the generated
+#: ``lens_aperture()`` copies out: :func:`lens_aperture_wgsl`), then the camera.
+_IMAGE_FIELDS = (
+    ("image_width", "u32"),
+    ("image_height", "u32"),
+    ("tile_x", "u32"),
+    ("tile_y", "u32"),
+    ("tile_width", "u32"),
+    ("tile_height", "u32"),
+    ("sample_index", "u32"),
+    ("seed", "u32"),
 )
+_CAMERA_FIELDS = (
+    ("aperture_scale", "f32"),
+    ("focus_distance", "f32"),
+    ("tan_half_x", "f32"),
+    ("tan_half_y", "f32"),
+    ("position_x", "f32"),
+    ("position_y", "f32"),
+    ("position_z", "f32"),
+    ("right_x", "f32"),
+    ("right_y", "f32"),
+    ("right_z", "f32"),
+    ("up_x", "f32"),
+    ("up_y", "f32"),
+    ("up_z", "f32"),
+    ("forward_x", "f32"),
+    ("forward_y", "f32"),
+    ("forward_z", "f32"),
+    ("max_depth", "u32"),
+    ("rr_depth", "u32"),
+)
+RENDER_PARAMS = Struct("RenderParams", _IMAGE_FIELDS + tuple(APERTURE_PARAM_FIELDS) + _CAMERA_FIELDS)
 POINT_PARAMS = Struct(
     "PointParams",
     (
@@ -84,6 +93,7 @@ POINT_PARAMS = Struct(
         ("weight_g", "f32"),
         ("weight_b", "f32"),
         ("stream", "u32"),
+        ("channel", "u32"),
         ("strata", "u32"),
         ("first", "u32"),
         ("count", "u32"),
@@ -94,14 +104,36 @@ POINT_PARAMS = Struct(
 #: desktop GPU's watchdog never sees a long one.
 DEFAULT_MAX_TILE_PIXELS = 2**22
 _ACCUM_BYTES = 16  # vec4f per pixel
-_TILE_GROUP = 8  # pathtrace.wgsl: @workgroup_size(8, 8)
-_LINEAR_GROUP = 256  # points.wgsl: @workgroup_size(256)
+#: Bind group 0 and workgroup size of ``pathtrace.wgsl`` (its generated include ``interface``):
+#: 8 × 8 pixels a workgroup, the 64 invocations browsers allow everywhere.
+PATHTRACE_INTERFACE = ComputeInterface(
+    (Binding("params", "uniform", "RenderParams"), Binding("accum", "storage, read_write", "array<vec4f>")),
+    workgroup_size=(8, 8),
+)
+#: Bind group 0 and workgroup size of ``points.wgsl`` (entry points ``splat`` and ``resolve``).
+POINTS_INTERFACE = ComputeInterface(
+    (
+        Binding("params", "uniform", "RenderParams"),
+        Binding("light", "uniform", "PointParams"),
+        Binding("counts", "storage, read_write", "array<atomic<u32>>"),
+        Binding("accum", "storage, read_write", "array<vec4f>"),
+    ),
+    workgroup_size=(256,),
+)
+_TILE_GROUP_X, _TILE_GROUP_Y = PATHTRACE_INTERFACE.workgroup_size
+_LINEAR_GROUP = POINTS_INTERFACE.threads
 #: Aperture samples of one light per splat dispatch.
 _SPLAT_CHUNK = 2**22
 #: Most jittered-grid strata a side for one light (strata² stays below 2³¹).
 _MAX_STRATA = 46340
 #: Wait for the adapter (and advance the progress bar) about this often, seconds.
 _SYNC_INTERVAL_S = 0.25
+#: Renders of at most this many samples are not estimated: a few seconds on a CPU adapter.
+QUICK_WORK = 2**23
+#: A trial render is grown until it lasts this long (seconds), so that its rate is measured, not its overhead.
+_TRIAL_S = 0.3
+#: Pixels of the first trial render.
+_TRIAL_PIXELS = 4096
 
 
 @dataclass(frozen=True)
@@ -170,31 +202,51 @@ def _max_tile_pixels(device, settings: RenderSettings) -> int:
     return max(1, min(allowed, cap))
 
 
+def lens_aperture_wgsl() -> str:
+    """The generated include ``lens_aperture``: ``fn lens_aperture() -> ApertureParams``.
+
+    It copies the aperture's fields out of the uniform ``params: RenderParams``
+    (field position 0: camera.wgsl's ``aperture_seen`` sets it per pixel or light).
+    """
+    values = ", ".join(f"params.{name}" for name, _ in APERTURE_PARAM_FIELDS)
+    return (
+        "// generated by bokehfit.scene.renderer from APERTURE_PARAM_FIELDS\n"
+        f"fn lens_aperture() -> ApertureParams {{\n    return ApertureParams({values});\n}}\n"
+    )
+
+
+def _generated(*structs: Struct) -> dict[str, str]:
+    """Generated includes of the renderers: the structs' declarations and ``lens_aperture``."""
+    return {**{s.name: s.wgsl() for s in structs}, "lens_aperture": lens_aperture_wgsl()}
+
+
 @lru_cache(maxsize=16)
 def pathtrace_source(scene_source: str) -> str:
     """The whole path-tracer WGSL for one generated scene, every include resolved.
 
     The browser viewer runs this same text (``bokehfit view``)."""
-    generated = {s.name: s.wgsl() for s in (RENDER_PARAMS, MATERIAL, QUAD, BOX, SPHERE)}
+    generated = _generated(RENDER_PARAMS, MATERIAL, QUAD, BOX, SPHERE)
     generated["scene"] = scene_source
+    generated["interface"] = PATHTRACE_INTERFACE.wgsl()
     return load_shader("pathtrace.wgsl", generated)
 
 
-def _pathtrace_pipeline(scene_source: str):
+def _pathtrace_pipeline(scene_source: str, adapter: AdapterChoice | None = None):
     """The path tracer compiled for one scene (its generated WGSL is the cache key)."""
     import wgpu
 
-    device = get_gpu().device
+    device = get_gpu(adapter).device
     module = device.create_shader_module(label="pathtrace", code=pathtrace_source(scene_source))
     return device.create_compute_pipeline(layout=wgpu.AutoLayoutMode.auto, compute={"module": module, "entry_point": "main"})
 
 
 @lru_cache(maxsize=None)
-def _points_pipelines():
+def _points_pipelines(adapter: AdapterChoice | None = None):
     import wgpu
 
-    device = get_gpu().device
-    generated = {s.name: s.wgsl() for s in (RENDER_PARAMS, POINT_PARAMS)}
+    device = get_gpu(adapter).device
+    generated = _generated(RENDER_PARAMS, POINT_PARAMS)
+    generated["interface"] = POINTS_INTERFACE.wgsl()
     module = device.create_shader_module(label="points", code=load_shader("points.wgsl", generated))
     return tuple(
         device.create_compute_pipeline(layout=wgpu.AutoLayoutMode.auto, compute={"module": module, "entry_point": entry})
@@ -203,21 +255,19 @@ def _points_pipelines():
 
 
 def render_params(lens: Lens, settings: RenderSettings, pose: Pose) -> np.ndarray:
-    """The uniform record, tile and sample fields left at 0."""
-    aperture = lens.aperture
-    angle = math.radians(aperture.angle_deg)
+    """The uniform record, tile and sample fields left at 0.
+
+    The aperture's fields are :meth:`bokehfit.apertures.Aperture.shader_params`
+    at field position 0 (the shaders set it per pixel or light).
+    """
     tan_x, tan_y = lens.tan_half_fov(settings.width, settings.height)
     right, up, forward = pose.basis()
     record = np.zeros((), dtype=RENDER_PARAMS.dtype)
     values = dict(
+        lens.aperture.shader_params(),
         image_width=settings.width,
         image_height=settings.height,
         seed=settings.seed,
-        shape=aperture.spec.shader_id,
-        blades=aperture.blades or 0,
-        aspect=aperture.aspect or 1.0,
-        cos_angle=math.cos(angle),
-        sin_angle=math.sin(angle),
         aperture_scale=lens.aperture_scale_m,
         focus_distance=lens.focus_distance_m,
         tan_half_x=tan_x,
@@ -272,23 +322,23 @@ def _read_tile(device, accum, tile) -> np.ndarray:
     return np.frombuffer(device.queue.read_buffer(accum), dtype=np.float32).reshape(h, w, 4)
 
 
-def _path_trace(scene: Scene, lens: Lens, settings: RenderSettings, progress):
+def _path_trace(scene: Scene, lens: Lens, settings: RenderSettings, progress, adapter: AdapterChoice | None = None):
     """(image, samples, tiles, setup_s, time_s) of the path tracer."""
     import wgpu
 
-    gpu = get_gpu()
+    gpu = get_gpu(adapter)
     device = gpu.device
     start = time.perf_counter()
-    pipeline = _pathtrace_pipeline(scene_wgsl(scene, mirror_nee=settings.mirror_nee))
+    pipeline = _pathtrace_pipeline(scene_wgsl(scene, mirror_nee=settings.mirror_nee), adapter)
     record = render_params(lens, settings, scene.pose)
     uniform = device.create_buffer(size=RENDER_PARAMS.dtype.itemsize, usage=wgpu.BufferUsage.UNIFORM | wgpu.BufferUsage.COPY_DST)
-    max_side = _TILE_GROUP * device.limits["max-compute-workgroups-per-dimension"]
+    max_side = min(_TILE_GROUP_X, _TILE_GROUP_Y) * device.limits["max-compute-workgroups-per-dimension"]
     tiles = tile_plan(settings.width, settings.height, _max_tile_pixels(device, settings), max_side)
     # Warm-up: an empty tile, so that a driver that compiles at the first dispatch
     # (lavapipe does) does it inside the setup time, not the render time.
     probe = device.create_buffer(size=_ACCUM_BYTES, usage=wgpu.BufferUsage.STORAGE | wgpu.BufferUsage.COPY_SRC)
     device.queue.write_buffer(uniform, 0, record.tobytes())  # tile 0 × 0: every invocation returns
-    dispatch(device, pipeline, bind_buffers(device, pipeline, uniform, probe), 1, 1)
+    dispatch(device, pipeline, PATHTRACE_INTERFACE.bind(device, pipeline, params=uniform, accum=probe), 1, 1)
     device.queue.read_buffer(probe)
     setup = time.perf_counter() - start
 
@@ -298,9 +348,9 @@ def _path_trace(scene: Scene, lens: Lens, settings: RenderSettings, progress):
         x, y, w, h = tile
         accum = device.create_buffer(size=_ACCUM_BYTES * w * h, usage=wgpu.BufferUsage.STORAGE | wgpu.BufferUsage.COPY_SRC)
         ticker = _Ticker(device, progress, accum)
-        bind_group = bind_buffers(device, pipeline, uniform, accum)
+        bind_group = PATHTRACE_INTERFACE.bind(device, pipeline, params=uniform, accum=accum)
         set_tile(record, tile)
-        groups = (-(-w // _TILE_GROUP), -(-h // _TILE_GROUP))
+        groups = (-(-w // _TILE_GROUP_X), -(-h // _TILE_GROUP_Y))
         for sample in range(settings.spp):
             record["sample_index"] = sample
             device.queue.write_buffer(uniform, 0, record.tobytes())
@@ -315,27 +365,47 @@ def _path_trace(scene: Scene, lens: Lens, settings: RenderSettings, progress):
     return image, settings.width * settings.height * settings.spp, len(tiles), setup, elapsed
 
 
+def _colour_passes(lens: Lens, color) -> list[tuple[int, np.ndarray]]:
+    """The splat passes of one light: (CHANNEL_* id, rgb weight).
+
+    One pass in every channel at once; with longitudinal colour (design.md
+    §3b) the red, green and blue discs differ in size, so each is a pass of
+    its own with the light's colour in that channel only.
+    """
+    color = np.asarray(color, dtype=np.float64)
+    if lens.aperture.chromatic is None:
+        return [(CHANNELS.index("green"), color)]
+    passes = []
+    for index, name in enumerate(("red", "green", "blue")):
+        weight = np.zeros(3)
+        weight[index] = color[index]
+        passes.append((CHANNELS.index(name), weight))
+    return passes
+
+
 def _light_plan(scene: PointScene, lens: Lens, settings: RenderSettings) -> list[dict]:
-    """Per light: slopes, 1/depth, strata, weight and the disc's bounding box (pixels)."""
+    """Per light: slopes, 1/depth, strata, colour passes and the disc's bounding box (pixels)."""
     tan_x, tan_y = lens.tan_half_fov(settings.width, settings.height)
-    extent = lens.aperture.extent() * math.sqrt(math.pi) / 2.0  # unit-area extent → per equal-area diameter
+    chromatic = lens.aperture.chromatic
+    largest = 1.0 if chromatic is None else 1.0 + max(0.0, abs(chromatic.red), abs(chromatic.blue))
+    # unit-area extent → per equal-area diameter, for the largest colour's disc
+    extent = lens.aperture.extent() * math.sqrt(math.pi) / 2.0 * largest
     plans = []
     for index, light in enumerate(scene.lights):
         diameter = lens.coc_px(light.depth_m, settings.width)
         area = math.pi / 4.0 * diameter * diameter
         strata = min(_MAX_STRATA, math.isqrt(max(0, math.ceil(settings.spp * max(area, 1.0)) - 1)) + 1)
         samples = strata * strata
-        weight = np.asarray(light.color, dtype=np.float64) * max(area, 1.0) / samples
+        passes = [(channel, weight * max(area, 1.0) / samples) for channel, weight in _colour_passes(lens, light.color)]
         centre = (light.x * settings.width, light.y * settings.height)
         reach = extent * diameter + 1.0
+        ndc_x, ndc_y = 2.0 * image_to_aperture((light.y - 0.5, light.x - 0.5))  # the frame's centre at 0, y up
         plans.append(
             dict(
-                slope_x=(2.0 * light.x - 1.0) * tan_x,
-                slope_y=(1.0 - 2.0 * light.y) * tan_y,
+                slope_x=float(ndc_x) * tan_x,
+                slope_y=float(ndc_y) * tan_y,
                 inv_depth=0.0 if math.isinf(light.depth_m) else 1.0 / light.depth_m,
-                weight_r=weight[0],
-                weight_g=weight[1],
-                weight_b=weight[2],
+                passes=passes,
                 stream=index,
                 strata=strata,
                 samples=samples,
@@ -345,14 +415,14 @@ def _light_plan(scene: PointScene, lens: Lens, settings: RenderSettings) -> list
     return plans
 
 
-def _splat(scene: PointScene, lens: Lens, settings: RenderSettings, progress):
+def _splat(scene: PointScene, lens: Lens, settings: RenderSettings, progress, adapter: AdapterChoice | None = None):
     """(image, samples, tiles, setup_s, time_s) of the point-light splatter."""
     import wgpu
 
-    gpu = get_gpu()
+    gpu = get_gpu(adapter)
     device = gpu.device
     start = time.perf_counter()
-    splat, resolve = _points_pipelines()
+    splat, resolve = _points_pipelines(adapter)
     record = render_params(lens, settings, Pose((0.0, 0.0, 0.0)))
     uniform = device.create_buffer(size=RENDER_PARAMS.dtype.itemsize, usage=wgpu.BufferUsage.UNIFORM | wgpu.BufferUsage.COPY_DST)
     light_uniform = device.create_buffer(size=POINT_PARAMS.dtype.itemsize, usage=wgpu.BufferUsage.UNIFORM | wgpu.BufferUsage.COPY_DST)
@@ -363,8 +433,9 @@ def _splat(scene: PointScene, lens: Lens, settings: RenderSettings, progress):
     device.queue.write_buffer(uniform, 0, record.tobytes())
     device.queue.write_buffer(light_uniform, 0, np.zeros((), dtype=POINT_PARAMS.dtype).tobytes())
     probes = [device.create_buffer(size=_ACCUM_BYTES, usage=wgpu.BufferUsage.STORAGE | wgpu.BufferUsage.COPY_SRC) for _ in range(2)]
-    dispatch(device, splat, bind_buffers(device, splat, uniform, light_uniform, probes[0]), 1)
-    dispatch(device, resolve, bind_buffers(device, resolve, uniform, light_uniform, *probes), 1)
+    dispatch(device, splat, POINTS_INTERFACE.bind(device, splat, params=uniform, light=light_uniform, counts=probes[0]), 1)
+    resolve_probe = POINTS_INTERFACE.bind(device, resolve, params=uniform, light=light_uniform, counts=probes[0], accum=probes[1])
+    dispatch(device, resolve, resolve_probe, 1)
     device.queue.read_buffer(probes[1])
     setup = time.perf_counter() - start
 
@@ -379,23 +450,26 @@ def _splat(scene: PointScene, lens: Lens, settings: RenderSettings, progress):
         counts = device.create_buffer(size=4 * w * h, usage=wgpu.BufferUsage.STORAGE)
         accum = device.create_buffer(size=_ACCUM_BYTES * w * h, usage=wgpu.BufferUsage.STORAGE | wgpu.BufferUsage.COPY_SRC)
         ticker = _Ticker(device, progress, accum)
-        splat_group = bind_buffers(device, splat, uniform, light_uniform, counts)
-        resolve_group = bind_buffers(device, resolve, uniform, light_uniform, counts, accum)
+        splat_group = POINTS_INTERFACE.bind(device, splat, params=uniform, light=light_uniform, counts=counts)
+        resolve_group = POINTS_INTERFACE.bind(device, resolve, params=uniform, light=light_uniform, counts=counts, accum=accum)
         for plan in plans:
             x0, y0, x1, y1 = plan["box"]
             if x1 < x or x0 > x + w or y1 < y or y0 > y + h:
-                ticker.add(plan["samples"])
+                ticker.add(plan["samples"] * len(plan["passes"]))
                 continue  # this light's disc misses the tile
-            for key in ("slope_x", "slope_y", "inv_depth", "weight_r", "weight_g", "weight_b", "stream", "strata"):
+            for key in ("slope_x", "slope_y", "inv_depth", "stream", "strata"):
                 light_record[key] = plan[key]
-            for first in range(0, plan["samples"], _SPLAT_CHUNK):
-                count = min(_SPLAT_CHUNK, plan["samples"] - first)
-                light_record["first"], light_record["count"] = first, count
-                device.queue.write_buffer(light_uniform, 0, light_record.tobytes())
-                dispatch(device, splat, splat_group, min(-(-count // _LINEAR_GROUP), max_groups))
-                drawn += count
-                ticker.add(count)
-            dispatch(device, resolve, resolve_group, min(-(-(w * h) // _LINEAR_GROUP), max_groups))
+            for channel, weight in plan["passes"]:
+                light_record["channel"] = channel
+                light_record["weight_r"], light_record["weight_g"], light_record["weight_b"] = weight
+                for first in range(0, plan["samples"], _SPLAT_CHUNK):
+                    count = min(_SPLAT_CHUNK, plan["samples"] - first)
+                    light_record["first"], light_record["count"] = first, count
+                    device.queue.write_buffer(light_uniform, 0, light_record.tobytes())
+                    dispatch(device, splat, splat_group, min(-(-count // _LINEAR_GROUP), max_groups))
+                    drawn += count
+                    ticker.add(count)
+                dispatch(device, resolve, resolve_group, min(-(-(w * h) // _LINEAR_GROUP), max_groups))
         ticker.flush()
         image[y : y + h, x : x + w] = _read_tile(device, accum, tile)[..., :3]
         counts.destroy()
@@ -409,24 +483,65 @@ def render_scene(
     lens: Lens,
     settings: RenderSettings,
     progress: Callable[[int], None] | None = None,
+    *,
+    adapter: AdapterChoice | None = None,
 ) -> RenderResult:
     """Render ``scene`` through ``lens``; ``progress(n)`` is told of finished work units.
+
+    ``adapter`` chooses the GPU (:func:`bokehfit.gpu.get_gpu`; the best one found by default).
 
     The units are samples: ``width·height·spp`` camera paths in all for a path
     traced scene, the aperture samples of every light (once per tile) for points.
     """
-    gpu = get_gpu()
+    gpu = get_gpu(adapter)
     if isinstance(scene, PointScene):
-        image, samples, tiles, setup, elapsed = _splat(scene, lens, settings, progress)
+        image, samples, tiles, setup, elapsed = _splat(scene, lens, settings, progress, adapter)
     else:
-        image, samples, tiles, setup, elapsed = _path_trace(scene, lens, settings, progress)
+        image, samples, tiles, setup, elapsed = _path_trace(scene, lens, settings, progress, adapter)
     return RenderResult(image, scene.name, lens, settings, samples, elapsed, setup, gpu.adapter_name, gpu.backend, tiles)
 
 
-def total_work(scene: Scene | PointScene, lens: Lens, settings: RenderSettings) -> int:
-    """The number of progress units ``render_scene`` will report (for a progress bar)."""
+def estimate_render_s(
+    scene: Scene | PointScene, lens: Lens, settings: RenderSettings, adapter: AdapterChoice | None = None
+) -> tuple[float, float]:
+    """Expected rendering time of ``render_scene(scene, lens, settings)``, and the rate measured.
+
+    Returns
+    -------
+    seconds : float
+        Total work (:func:`total_work`) over the rate of a trial render.
+    samples_per_second : float
+        The trial's rate.
+
+    Notes
+    -----
+    The trial is the same scene and lens at 1 spp on about 4096 pixels (the
+    image scaled down), grown (first the image, by 2 a side, then the samples
+    per pixel, by 4; never beyond the real render) until it lasts 0.3 s: it
+    takes about a second at most, and on a fast adapter it grows large enough
+    that dispatch overhead does not dominate. Start-up (shader compilation)
+    is not counted, as in :attr:`RenderResult.time_s`.
+    """
+    total = total_work(scene, lens, settings, adapter)
+    shrink = max(1, math.isqrt(settings.width * settings.height // _TRIAL_PIXELS))
+    spp = 1
+    while True:
+        width, height = max(1, settings.width // shrink), max(1, settings.height // shrink)
+        result = render_scene(scene, lens, replace(settings, width=width, height=height, spp=spp), adapter=adapter)
+        if result.time_s >= _TRIAL_S or (shrink == 1 and spp == settings.spp):
+            break
+        if shrink > 1:
+            shrink //= 2
+        else:
+            spp = min(settings.spp, spp * 4)
+    rate = result.samples / max(result.time_s, 1e-9)
+    return total / rate, rate
+
+
+def total_work(scene: Scene | PointScene, lens: Lens, settings: RenderSettings, adapter: AdapterChoice | None = None) -> int:
+    """The number of progress units ``render_scene`` will report (for a progress bar) on ``adapter``."""
     if isinstance(scene, PointScene):
-        device = get_gpu().device
+        device = get_gpu(adapter).device
         tiles = len(tile_plan(settings.width, settings.height, _max_tile_pixels(device, settings), settings.width))
-        return tiles * sum(p["samples"] for p in _light_plan(scene, lens, settings))
+        return tiles * sum(p["samples"] * len(p["passes"]) for p in _light_plan(scene, lens, settings))
     return settings.width * settings.height * settings.spp

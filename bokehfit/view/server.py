@@ -66,15 +66,16 @@ from urllib.parse import parse_qs, urlsplit
 import numpy as np
 
 from bokehfit import __version__
-from bokehfit.apertures import SHAPES, make_aperture
+from bokehfit.apertures import SHAPES, Aperture, make_aperture
 from bokehfit.apertures.shapes import DEFAULT_SLIT_ASPECT, MAX_BLADES
 from bokehfit.errors import InputError, check_finite
 from bokehfit.gpu.layout import Struct
 from bokehfit.scene import SCENES, Lens, Scene, build_scene, make_lens, make_settings
 from bokehfit.scene.camera import FOCAL_LENGTH_MM, FSTOP_RANGE, MAX_IMAGE_SIDE, SENSOR_WIDTH_MM
-from bokehfit.scene.renderer import RENDER_PARAMS, render_params, set_tile
+from bokehfit.scene.renderer import PATHTRACE_INTERFACE, RENDER_PARAMS, render_params, set_tile
 from bokehfit.scene.renderer import pathtrace_source as renderer_source
 from bokehfit.scene.wgsl import scene_wgsl
+from bokehfit.validate import RANGES
 
 __all__ = [
     "COC_DIVISOR",
@@ -104,6 +105,20 @@ ASPECT_SLIDER = (0.05, 1.0)
 #: rear wall lie up to twice as deep).
 FOCUS_SLIDER_NEAR_M = 0.1
 FOCUS_SLIDER_REACH = 2.0
+#: Slider ranges of the real-lens features (design.md §3b), inside what the model
+#: accepts (bokehfit.validate.RANGES): anamorphic lenses squeeze 1.33 to 2, real
+#: barrels shift within ±3, and longitudinal colour is a few per cent.
+FEATURE_SLIDERS = {
+    "roundness": (RANGES["roundness"].low, RANGES["roundness"].high),
+    "squeeze": (0.5, 2.0),
+    "vignetting_radius": (RANGES["vignetting_radius"].low, 3.0),
+    "vignetting_shift": (-3.0, 3.0),
+    "rim": (RANGES["rim"].low, RANGES["rim"].high),
+    "chromatic_red": (-0.1, 0.1),
+    "chromatic_blue": (-0.1, 0.1),
+}
+#: Where the vignetting sliders start when the barrel is switched on (it is off by default).
+VIGNETTING_START = {"radius": 1.5, "shift": 1.0}
 #: Largest request body of POST /matched (bytes).
 MAX_BODY_BYTES = 8 * 2**20
 #: Longest request line (method, target and version, bytes): 414 beyond.
@@ -169,11 +184,11 @@ def pathtrace_source(scene: Scene, *, mirror_nee: bool = False) -> str:
 
 
 def _shader_interface(source: str) -> dict:
-    """Entry point, workgroup size and bindings of the compute shader, read from its text."""
-    entry = re.search(r"@compute\s+@workgroup_size\(\s*(\d+)\s*(?:,\s*(\d+)\s*)?(?:,\s*(\d+)\s*)?\)\s*fn\s+(\w+)", source)
+    """Entry point and bindings of the compute shader, read from its text; its workgroup size (PATHTRACE_INTERFACE)."""
+    entry = re.search(r"@compute\s+@workgroup_size\([^)]*\)\s*fn\s+(\w+)", source)
     if entry is None:
         raise RuntimeError("pathtrace.wgsl has no @compute entry point with a @workgroup_size")
-    size = [int(v) if v else 1 for v in entry.groups()[:3]]
+    size = [*PATHTRACE_INTERFACE.workgroup_size, 1, 1][:3]
     bindings = {
         name: {"group": int(group), "binding": int(binding), "space": space}
         for group, binding, space, name in re.findall(
@@ -183,7 +198,7 @@ def _shader_interface(source: str) -> dict:
     for name in ("params", "accum"):
         if name not in bindings:
             raise RuntimeError(f"pathtrace.wgsl declares no binding {name!r}")
-    return {"entry_point": entry.group(4), "workgroup_size": size, "bindings": bindings}
+    return {"entry_point": entry.group(1), "workgroup_size": size, "bindings": bindings}
 
 
 def uniform_layout(struct: Struct = RENDER_PARAMS) -> dict:
@@ -306,17 +321,39 @@ def _deepest_point_m(scene: Scene) -> float:
 def _shape_entries() -> list[dict]:
     entries = []
     for name, spec in SHAPES.items():
+        if spec.tabulated:
+            continue  # the viewer does not sample a mask yet
         entries.append(
             {
                 "name": name,
                 "family": spec.family,
                 "takes_blades": spec.takes_blades,
                 "takes_aspect": spec.takes_aspect,
+                "rounds": spec.rounds,
                 "fixed_blades": spec.fixed_blades,
-                "has_angle": spec.family != "circle",
+                "has_angle": make_aperture(name, blades=3 if spec.takes_blades else None).has_angle,
             }
         )
     return entries
+
+
+def _feature_defaults() -> dict:
+    """The sliders' defaults of the §3b features: the aperture model's neutral values (design.md §3b).
+
+    Vignetting and colour are off (``vignetting``/``chromatic`` False); their
+    sliders start at :data:`VIGNETTING_START` and at no colour.
+    """
+    neutral = Aperture("circle")
+    return {
+        "roundness": neutral.roundness,
+        "squeeze": neutral.squeeze,
+        "rim": neutral.rim,
+        "vignetting": neutral.vignetting is not None,
+        "vignetting_radius": VIGNETTING_START["radius"],
+        "vignetting_shift": VIGNETTING_START["shift"],
+        "chromatic_red": 0.0,
+        "chromatic_blue": 0.0,
+    }
 
 
 def viewer_config(scene_name: str = "cornell", size: tuple[int, int] = DEFAULT_SIZE) -> dict:
@@ -340,6 +377,7 @@ def viewer_config(scene_name: str = "cornell", size: tuple[int, int] = DEFAULT_S
             "aspect": list(ASPECT_SLIDER),
             "angle_deg": [0.0, 360.0],
             "image_side": [8, MAX_IMAGE_SIDE],
+            **{name: list(bounds) for name, bounds in FEATURE_SLIDERS.items()},
         },
         "defaults": {
             "shape": "circle",
@@ -348,6 +386,7 @@ def viewer_config(scene_name: str = "cornell", size: tuple[int, int] = DEFAULT_S
             "focus_distance_m": float(scene.default_focus_m),
             "blades": 7,
             "aspect": DEFAULT_SLIT_ASPECT,
+            **_feature_defaults(),
             "width": size[0],
             "height": size[1],
         },
@@ -377,11 +416,21 @@ def params_for_query(query: dict, scene_name: str = "cornell") -> dict:
     """``/params.json``: the uniform values, lens and depth of field for the page's settings.
 
     ``query`` maps names to lists of strings (as from :func:`urllib.parse.parse_qs`):
-    shape, angle (degrees), fstop, focus (m), blades (ngon), aspect (slit), width, height.
+    shape, angle (degrees), fstop, focus (m), blades (ngon), aspect (slit), width, height,
+    and the §3b features: roundness (n-gons), squeeze, rim, vignetting_radius with
+    vignetting_shift (both, or neither: no vignetting), chromatic_red with chromatic_blue.
     """
     scene = build_scene(scene_name)
     shape = (query.get("shape") or ["circle"])[-1]
     spec = SHAPES.get(shape)
+    pairs = {}
+    for pair, keys in (("vignetting", ("radius", "shift")), ("chromatic", ("red", "blue"))):
+        values = {key: _query_number(query, f"{pair}_{key}") for key in keys}
+        given = [key for key, value in values.items() if value is not None]
+        if given and len(given) < 2:
+            missing = next(key for key in keys if key not in given)
+            raise InputError(f"{pair}_{missing} must be given with {pair}_{given[0]}")
+        pairs[pair] = values if given else None
     lens = make_lens(
         shape,
         _query_number(query, "angle", 0.0),
@@ -389,6 +438,10 @@ def params_for_query(query: dict, scene_name: str = "cornell") -> dict:
         focus_distance_m=_query_number(query, "focus", scene.default_focus_m),
         blades=_query_int(query, "blades") if spec is not None and spec.takes_blades else None,
         aspect=_query_number(query, "aspect") if spec is not None and spec.takes_aspect else None,
+        roundness=_query_number(query, "roundness", 0.0) if spec is not None and spec.rounds else 0.0,
+        squeeze=_query_number(query, "squeeze", 1.0),
+        rim=_query_number(query, "rim", 0.0),
+        **pairs,
     )
     width = _query_int(query, "width", DEFAULT_SIZE[0])
     height = _query_int(query, "height", DEFAULT_SIZE[1])
@@ -398,6 +451,10 @@ def params_for_query(query: dict, scene_name: str = "cornell") -> dict:
         "values": uniform_values(lens, settings.width, settings.height, scene),
         "lens": lens.to_json(),
         "describe": lens.describe(),
+        "label": lens.aperture.label,
+        # The shape's own options of `bokehfit render`, from the model's parameters (blades, aspect).
+        "shape_flags": (f" --blades {lens.aperture.blades}" if lens.aperture.spec.takes_blades else "")
+        + (f" --aspect {lens.aperture.aspect:g}" if "aspect" in lens.aperture.parameters else ""),
         "symmetry_deg": lens.aperture.symmetry_deg,
         "canonical_angle_deg": lens.aperture.canonical_angle_deg,
         "coc_px_at_infinity": lens.coc_px(math.inf, settings.width),
@@ -505,9 +562,12 @@ def parse_json_body(body: bytes, *, max_depth: int = MAX_JSON_DEPTH, max_int_dig
 def settings_from_compare(document: dict) -> dict:
     """The viewer settings of the aperture fitted in a ``bokehfit compare --json`` document.
 
-    Returns ``{"shape", "angle_deg", "blades", "aspect", "fstop", "notes"}``:
-    blades only for ``ngon``, aspect only for ``slit``, fstop None where the
-    document has none (the photo's geometry was unknown). A circumscribed
+    Returns ``{"shape", "angle_deg", "blades", "aspect", "fstop", "notes"}`` and the
+    §3b features ``roundness``, ``squeeze``, ``rim``, ``vignetting`` (``{radius, shift}``
+    or None) and ``chromatic`` (``{red, blue}`` or None), each at its default where
+    the document has null or lacks it (schema 1): blades only for ``ngon``,
+    aspect only for ``slit``, fstop None where the document has none (the
+    photo's geometry was unknown). A circumscribed
     f-stop (``size_convention``) is converted to the renderer's equal-area one,
     N_eq = N_circ·R·√π (R: the unit-area shape's circumradius; bokehfit.optics).
 
@@ -538,7 +598,17 @@ def settings_from_compare(document: dict) -> dict:
     for key in ("focus_side", "size_convention", "fstop_reason"):
         if a.get(key) is not None and not isinstance(a[key], str):
             raise InputError(f"aperture.{key} must be a string or null (got {_brief(a[key])})")
-    aperture = make_aperture(shape, angle, blades=blades, aspect=aspect)  # validates their ranges
+    features = {}
+    for key, default in (("roundness", 0.0), ("squeeze", 1.0), ("rim", 0.0)):
+        value = a.get(key)
+        features[key] = default if value is None else _finite_number(f"aperture.{key}", value)
+    for pair, keys in (("vignetting", ("radius", "shift")), ("chromatic", ("red", "blue"))):
+        value = a.get(pair)
+        if value is not None and not (isinstance(value, dict) and all(key in value for key in keys)):
+            raise InputError(f"aperture.{pair} must be an object with keys {', '.join(keys)}, or null (got {_brief(value)})")
+        features[pair] = None if value is None else {key: _finite_number(f"aperture.{pair}.{key}", value[key]) for key in keys}
+    # validates their ranges
+    aperture = make_aperture(shape, angle, blades=blades, aspect=aspect, **features)
     notes = []
     fstop = a.get("fstop")
     if fstop is not None:
@@ -552,14 +622,18 @@ def settings_from_compare(document: dict) -> dict:
             fstop = None
     else:
         notes.append(a.get("fstop_reason") or "the compare result has no f-stop: kept the current one")
-    odd = spec.family == "star" or (spec.family == "ngon" and aperture.blades % 2 == 1)
-    if odd and a.get("focus_side") == "unknown":
+    if aperture.odd_symmetry and a.get("focus_side") == "unknown":
         notes.append("odd symmetry and unknown side of focus: the angle is known only modulo half the symmetry")
     return {
         "shape": shape,
         "angle_deg": angle,
         "blades": aperture.blades if spec.takes_blades else None,
         "aspect": aperture.aspect,
+        "roundness": aperture.roundness,
+        "squeeze": aperture.squeeze,
+        "rim": aperture.rim,
+        "vignetting": None if aperture.vignetting is None else {"radius": aperture.vignetting.radius, "shift": aperture.vignetting.shift},
+        "chromatic": None if aperture.chromatic is None else {"red": aperture.chromatic.red, "blue": aperture.chromatic.blue},
         "fstop": fstop,
         "describe": aperture.describe(),
         "notes": notes,
@@ -773,6 +847,9 @@ class _HTTPServer(ThreadingHTTPServer):
     """A thread per connection, at most MAX_CONNECTIONS at once; failures logged as one line."""
 
     daemon_threads = True
+    # Closing does not wait for handler threads: one may sit on an idle browser
+    # connection until its timeout, and Ctrl-C must stop the server at once.
+    block_on_close = False
     allow_reuse_address = True
     request_queue_size = LISTEN_BACKLOG
 

@@ -22,8 +22,12 @@ from bokehfit.synthetic import SyntheticDisc, encode_srgb8, render_discs
 
 #: The largest float32 below 1: the top of every sampler's domain (design.md §5).
 U_TOP = 1.0 - 2.0**-24
+#: A small transmission image for the tabulated (mask) aperture: a ramp with an opaque corner.
+HARD_MASK = np.clip(np.add.outer(np.linspace(0.0, 1.0, 5), np.linspace(0.2, 1.0, 5)), 0.0, 1.0)
 #: Every shape; the slit at aspect 0.6 so that it fits the small frames used here.
-SHAPE_PARAMS = [(s, {"ngon": {"blades": 7}, "slit": {"aspect": 0.6}}.get(s, {})) for s in SHAPES]
+SHAPE_PARAMS = [(s, {"ngon": {"blades": 7}, "slit": {"aspect": 0.6}, "mask": {"mask": HARD_MASK}}.get(s, {})) for s in SHAPES]
+#: The shapes the dispatch-by-id WGSL sampler serves (a mask needs its table bound: tests/test_mask.py).
+OUTLINE_SHAPE_PARAMS = [(s, p) for s, p in SHAPE_PARAMS if not SHAPES[s].tabulated]
 
 
 # --- Kernels -------------------------------------------------------------------------
@@ -64,13 +68,13 @@ def test_angles_at_the_symmetry_plus_and_minus_a_microdegree(shape, params):
 def test_top_of_the_unit_square_in_every_numpy_sampler(shape, params):
     aperture = make_aperture(shape, **params)
     corners = np.array([[U_TOP, U_TOP], [U_TOP, 0.0], [0.0, U_TOP], [0.0, 0.0], [0.5, U_TOP]])
-    points = aperture.sample(corners)
+    points, _ = aperture.sample(corners)
     assert np.isfinite(points).all()
     reach = aperture.extent()
     assert (np.hypot(points[:, 0], points[:, 1]) <= reach * (1 + 1e-9)).all()
 
 
-@pytest.mark.parametrize("shape,params", SHAPE_PARAMS)
+@pytest.mark.parametrize("shape,params", OUTLINE_SHAPE_PARAMS)
 def test_top_of_the_unit_square_in_every_wgsl_sampler(gpu, run_wgsl_sampler, shape, params):
     aperture = make_aperture(shape, **params)
     corners = np.array([[U_TOP, U_TOP], [U_TOP, 0.0], [0.0, U_TOP], [0.0, 0.0], [0.5, U_TOP]], dtype=np.float32)
@@ -78,7 +82,7 @@ def test_top_of_the_unit_square_in_every_wgsl_sampler(gpu, run_wgsl_sampler, sha
     call = f"rotate(sample_aperture({spec.shader_id}u, u, {aperture.blades or 0}u, {aperture.aspect or 1.0}), 1.0, 0.0)"
     points = run_wgsl_sampler(gpu, call, corners)
     assert np.isfinite(points).all()
-    np.testing.assert_allclose(points, aperture.sample(corners.astype(np.float64)), atol=2e-6 * aperture.extent())
+    np.testing.assert_allclose(points, aperture.sample(corners.astype(np.float64))[0], atol=2e-6 * aperture.extent())
 
 
 @pytest.mark.parametrize("tolerance", [3e-2, 1e-2])
@@ -98,11 +102,17 @@ def test_light_at_the_focus_distance_makes_no_disc_and_no_fstop():
         fstop_from_coc(0.1, 50.0, 3.0, 3.0)
 
 
-def test_fstop_towards_infinity_stays_finite():
-    for fstop in (1e6, 1e12):
+def test_fstop_at_the_pinhole_end_stays_finite():
+    for fstop in (1e3, 1e4):  # 1e4 is the largest f-stop bokehfit.validate accepts
         c = coc_mm(fstop, 50.0, 3.0, math.inf)
-        assert 0.0 < c < 1e-3 and math.isfinite(c)
+        assert 0.0 < c < 1e-1 and math.isfinite(c)
         assert fstop_from_coc(c, 50.0, 3.0, math.inf) == pytest.approx(fstop, rel=1e-9)
+
+
+@pytest.mark.parametrize("fstop", [1e6, 1e12, math.inf, math.nan])
+def test_fstop_beyond_a_pinhole_is_refused_by_name(fstop):
+    with pytest.raises(InputError, match="fstop"):
+        coc_mm(fstop, 50.0, 3.0, math.inf)
 
 
 @pytest.mark.parametrize("focus_m", [0.05, 0.049, 0.0])

@@ -17,12 +17,16 @@
 // everywhere.
 //
 // URL options: ?size=WxH, max_spp=N (stop there; default 4096), mode=edit, and the
-// settings shape, angle, fstop, focus, blades, aspect.
+// settings shape, angle, fstop, focus, blades, aspect, and the real-lens features roundness,
+// squeeze, rim, vignetting_radius with vignetting_shift, chromatic_red with chromatic_blue.
 
 const $ = (id) => document.getElementById(id);
 const query = new URLSearchParams(location.search);
 
 const DEFAULT_MAX_SPP = 4096;
+// The real-lens features' sliders (design.md §3b): state key = range and default key of
+// /config.json; the element id is the key with dashes.
+const FEATURE_SLIDERS = ["roundness", "squeeze", "rim", "vignetting_radius", "vignetting_shift", "chromatic_red", "chromatic_blue"];
 // Samples per submission batch adapt so that one batch takes about this long (ms).
 const BATCH_TARGET_MS = 60;
 const MAX_BATCH = 32;
@@ -541,6 +545,14 @@ class Viewer {
       focus_distance_m: num("focus", d.focus_distance_m),
       blades: Math.round(num("blades", d.blades)),
       aspect: num("aspect", d.aspect),
+      roundness: num("roundness", d.roundness),
+      squeeze: num("squeeze", d.squeeze),
+      rim: num("rim", d.rim),
+      vignetting: query.has("vignetting_radius") && query.has("vignetting_shift") ? true : d.vignetting,
+      vignetting_radius: num("vignetting_radius", d.vignetting_radius),
+      vignetting_shift: num("vignetting_shift", d.vignetting_shift),
+      chromatic_red: num("chromatic_red", d.chromatic_red),
+      chromatic_blue: num("chromatic_blue", d.chromatic_blue),
     };
   }
 
@@ -589,6 +601,17 @@ class Viewer {
     });
     if (spec.takes_blades) q.set("blades", String(s.blades));
     if (spec.takes_aspect) q.set("aspect", String(s.aspect));
+    if (spec.rounds) q.set("roundness", String(s.roundness));
+    q.set("squeeze", String(s.squeeze));
+    q.set("rim", String(s.rim));
+    if (s.vignetting) {
+      q.set("vignetting_radius", String(s.vignetting_radius));
+      q.set("vignetting_shift", String(s.vignetting_shift));
+    }
+    if (s.chromatic_red !== 0 || s.chromatic_blue !== 0) {
+      q.set("chromatic_red", String(s.chromatic_red));
+      q.set("chromatic_blue", String(s.chromatic_blue));
+    }
     return q;
   }
 
@@ -706,6 +729,7 @@ class Viewer {
     range("blades", r.blades);
     range("aspect", r.aspect);
     range("angle", r.angle_deg);
+    for (const key of FEATURE_SLIDERS) range(key.replaceAll("_", "-"), r[key]);
 
     const bind = (id, key, parse) => {
       $(id).addEventListener("input", () => {
@@ -719,6 +743,11 @@ class Viewer {
     bind("aspect", "aspect", parseFloat);
     bind("fstop", "fstop", parseFloat);
     bind("focus-distance", "focus_distance_m", parseFloat);
+    for (const key of FEATURE_SLIDERS) bind(key.replaceAll("_", "-"), key, parseFloat);
+    $("vignetting").addEventListener("input", () => {
+      this.state.vignetting = $("vignetting").checked;
+      this.apply();
+    });
 
     $("mode-toggle").addEventListener("click", () => this.setMode(document.body.dataset.mode === "edit" ? "view" : "edit"));
     document.addEventListener("keydown", (event) => {
@@ -771,6 +800,14 @@ class Viewer {
     $("focus-distance").value = String(s.focus_distance_m);
     $("blades-row").hidden = !spec.takes_blades;
     $("aspect-row").hidden = !spec.takes_aspect;
+    $("roundness-row").hidden = !spec.rounds;
+    for (const key of FEATURE_SLIDERS) {
+      $(key.replaceAll("_", "-")).value = String(s[key]);
+      $(`${key.replaceAll("_", "-")}-out`).textContent = s[key].toFixed(key.startsWith("chromatic") ? 3 : 2);
+    }
+    $("vignetting").checked = s.vignetting;
+    $("vignetting-out").textContent = s.vignetting ? "on" : "off";
+    $("vignetting-radius").disabled = $("vignetting-shift").disabled = !s.vignetting;
     $("shape-out").textContent = "";
     $("angle-out").textContent = spec.has_angle ? `${s.angle_deg.toFixed(1)}°` : "—";
     $("blades-out").textContent = String(s.blades);
@@ -801,6 +838,16 @@ class Viewer {
       if (m.blades !== null) this.state.blades = m.blades;
       if (m.aspect !== null) this.state.aspect = m.aspect;
       if (m.fstop !== null) this.state.fstop = m.fstop;
+      // The real-lens features: the document's, or the defaults where it has none (null).
+      const d = this.config.defaults;
+      this.state.roundness = m.roundness;
+      this.state.squeeze = m.squeeze;
+      this.state.rim = m.rim;
+      this.state.vignetting = m.vignetting !== null;
+      this.state.vignetting_radius = m.vignetting !== null ? m.vignetting.radius : d.vignetting_radius;
+      this.state.vignetting_shift = m.vignetting !== null ? m.vignetting.shift : d.vignetting_shift;
+      this.state.chromatic_red = m.chromatic !== null ? m.chromatic.red : d.chromatic_red;
+      this.state.chromatic_blue = m.chromatic !== null ? m.chromatic.blue : d.chromatic_blue;
       await this.apply();
       const fstop = m.fstop !== null ? `, f/${m.fstop.toFixed(2)}` : "";
       this.showMessage(`Matched aperture from ${file.name}: ${m.describe}${fstop}` + (m.notes.length ? ` (${m.notes.join("; ")})` : ""));
@@ -828,15 +875,27 @@ class Viewer {
         `bokehfit render --scene ${this.config.scene.name} --shape ${this.state.shape}` +
         ` --angle ${this.info.lens.angle_deg} --fstop ${this.info.lens.fstop}` +
         ` --focus-distance ${this.info.lens.focus_distance_m}` +
-        (this.info.lens.shape === "ngon" ? ` --blades ${this.info.lens.blades}` : "") +
-        (this.info.lens.shape === "slit" ? ` --aspect ${this.info.lens.aspect}` : "") +
+        this.info.shape_flags +
+        this.featureFlags() +
         ` --spp ${this.spp} --size ${this.width}x${this.height} --out frame.png`,
     };
   }
 
+  // The render command's flags of the real-lens features that are on.
+  featureFlags() {
+    const l = this.info.lens;
+    return (
+      (l.roundness !== 0 ? ` --roundness ${l.roundness}` : "") +
+      (l.squeeze !== 1 ? ` --squeeze ${l.squeeze}` : "") +
+      (l.rim !== 0 ? ` --rim ${l.rim}` : "") +
+      (l.vignetting !== null ? ` --vignetting ${l.vignetting.radius},${l.vignetting.shift}` : "") +
+      (l.chromatic !== null ? ` --chromatic ${l.chromatic.red},${l.chromatic.blue}` : "")
+    );
+  }
+
   fileName() {
     const l = this.info.lens;
-    const shape = l.shape === "ngon" ? `ngon${l.blades}` : l.shape === "slit" ? `slit${l.aspect}` : l.shape;
+    const shape = this.info.label.replace(/[^a-z0-9.]+/gi, "") + ("aspect" in l && l.aspect !== null ? l.aspect : "");
     const angle = this.shapes[l.shape].has_angle ? `_${this.info.canonical_angle_deg.toFixed(1)}deg` : "";
     return `bokehfit_${this.config.scene.name}_${shape}${angle}_f${l.fstop.toFixed(2)}_focus${l.focus_distance_m.toFixed(3)}m_${this.spp}spp.png`;
   }

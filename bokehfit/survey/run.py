@@ -1,0 +1,293 @@
+"""Run a survey: hash the photos, skip what the database holds, farm the rest out, store each result.
+
+Two engines do the farming, both existing ones: :class:`concurrent.futures.ProcessPoolExecutor`
+on this machine (each worker process imports bokehfit and opens the GPU once,
+in its initializer) and a Dask ``distributed`` cluster. Whichever runs the
+photos, the parent process alone writes: the per-photo JSON and HTML reports
+(atomically, through :mod:`bokehfit.outputs`), then the photo's row, committed
+on its own, as each result arrives.
+"""
+
+from __future__ import annotations
+
+import collections
+import concurrent.futures
+import contextlib
+import multiprocessing
+import os
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from bokehfit.errors import InputError
+from bokehfit.outputs import write_bytes_atomic, write_json
+from bokehfit.survey.files import content_hash
+from bokehfit.survey.store import SurveyStore, reports_folder, row_from_record
+from bokehfit.survey.work import FAILURE_STATUSES, PhotoTask, init_worker, survey_photo
+
+__all__ = ["SurveyRun", "run_survey", "IN_FLIGHT_PER_WORKER", "MAX_WORKER_CRASHES"]
+
+#: Tasks handed out per worker at a time: one running, one waiting, so no worker idles
+#: between results while few enough are out that a crash or Ctrl-C loses little.
+IN_FLIGHT_PER_WORKER = 2
+#: A photo whose worker process died this many times is recorded as an error (it is the likely cause).
+MAX_WORKER_CRASHES = 2
+
+
+@dataclass
+class SurveyRun:
+    """What one survey run did.
+
+    Attributes
+    ----------
+    found : int
+        Photo files named by the paths.
+    skipped : int
+        Already in the database (or the same content as another file of this run).
+    done : int
+        Rows written by this run.
+    statuses : collections.Counter
+        Rows written by this run, by status.
+    seconds : float
+        Wall-clock time of the run (hashing included).
+    interrupted : bool
+        Stopped by Ctrl-C; what was done is saved and a rerun resumes.
+    """
+
+    found: int = 0
+    skipped: int = 0
+    done: int = 0
+    statuses: collections.Counter = field(default_factory=collections.Counter)
+    seconds: float = 0.0
+    interrupted: bool = False
+
+    def summary(self) -> str:
+        counts = ", ".join(f"{n} {status}" for status, n in sorted(self.statuses.items())) or "nothing new"
+        rate = f", {self.done / self.seconds:.2f} photos/s" if self.done and self.seconds > 0 else ""
+        head = "survey interrupted (rerun to resume)" if self.interrupted else "survey done"
+        return f"{head}: {self.found} photos, {self.skipped} already done, {self.done} new ({counts}) in {self.seconds:.1f} s{rate}"
+
+
+def _safe_stem(path: str) -> str:
+    stem = "".join(c if c.isalnum() or c in "-_." else "_" for c in Path(path).stem)
+    return stem[:80] or "photo"
+
+
+class _Keeper:
+    """The parent's one writer: per-photo reports, then the row."""
+
+    def __init__(self, store: SurveyStore, sizes: dict[str, int | None]):
+        self.store, self.sizes = store, sizes
+        self.folder = reports_folder(store.path)
+
+    def keep(self, record: dict) -> str:
+        json_path = html_path = None
+        document = record.get("document")
+        if document is not None:
+            self.folder.mkdir(exist_ok=True)
+            name = f"{_safe_stem(record['path'])}-{record['sha256'][:12]}"
+            json_path = f"{self.folder.name}/{name}.json"
+            write_json(self.store.path.parent / json_path, document)
+            if record.get("html") is not None:
+                html_path = f"{self.folder.name}/{name}.html"
+                write_bytes_atomic(self.store.path.parent / html_path, record["html"].encode("utf-8"))
+        row = row_from_record(record, size_bytes=self.sizes.get(record["sha256"]), json_path=json_path, html_path=html_path)
+        self.store.put(row)
+        return row["status"]
+
+
+def _failure(task: PhotoTask, status: str, reason: str) -> dict:
+    return {"sha256": task.sha256, "path": task.path, "status": status, "reason": reason, "document": None,
+            "html": None, "thumbnail": None, "warnings": [], "seconds": None, "worker": None}
+
+
+@contextlib.contextmanager
+def _unimportable_main_hidden():
+    """While inside, a main script that can't be read again is hidden from the workers that start.
+
+    A spawned worker first runs the parent's main script again from its path. A
+    script read from stdin (``python - < survey.py``) has the path ``<stdin>``,
+    which isn't a file, and every worker would die starting; hidden, the workers
+    skip it, as they do for ``python -c`` and notebooks.
+    """
+    main = sys.modules.get("__main__")
+    path = getattr(main, "__file__", None)
+    if path is None or getattr(main, "__spec__", None) is not None or os.path.isfile(path):
+        yield
+        return
+    del main.__file__
+    try:
+        yield
+    finally:
+        main.__file__ = path
+
+
+class _LocalEngine:
+    """A process pool on this machine, rebuilt if a worker process dies."""
+
+    def __init__(self, jobs: int, adapter):
+        self.jobs, self.adapter = jobs, adapter
+        self.pool = self._new_pool()
+        self.workers = jobs
+
+    def _new_pool(self):
+        # spawn: a fresh interpreter per worker (no threads of the parent's GPU or database inherited)
+        return concurrent.futures.ProcessPoolExecutor(
+            max_workers=self.jobs, mp_context=multiprocessing.get_context("spawn"),
+            initializer=init_worker, initargs=(self.adapter,),
+        )
+
+    def submit(self, task: PhotoTask):
+        with _unimportable_main_hidden():  # the pool starts its processes as tasks arrive
+            return self.pool.submit(survey_photo, task)
+
+    def wait(self, futures):
+        done, _ = concurrent.futures.wait(futures, return_when=concurrent.futures.FIRST_COMPLETED)
+        return done
+
+    def crashed(self, error: BaseException) -> bool:
+        if isinstance(error, concurrent.futures.process.BrokenProcessPool):
+            self.pool.shutdown(wait=False, cancel_futures=True)
+            self.pool = self._new_pool()
+            return True
+        return False
+
+    def close(self, interrupted: bool) -> None:
+        self.pool.shutdown(wait=not interrupted, cancel_futures=True)
+
+
+class _DaskEngine:
+    """A Dask ``distributed`` cluster: the photo's bytes travel with its task, so workers need no shared folder."""
+
+    def __init__(self, scheduler, adapter, timeout_s: float):
+        import distributed
+
+        self.distributed = distributed
+        self.own_client = not isinstance(scheduler, distributed.Client)
+        try:
+            self.client = distributed.Client(scheduler, timeout=timeout_s) if self.own_client else scheduler
+        except (OSError, TimeoutError, ValueError) as error:
+            raise InputError(f"--scheduler {scheduler!r}: can't reach a Dask scheduler there ({' '.join(str(error).split())})") from None
+        self.workers = max(1, sum(self.client.nthreads().values()))
+        self.client.run(init_worker, adapter, False)
+
+    def submit(self, task: PhotoTask):
+        data = Path(task.path).read_bytes()
+        return self.client.submit(survey_photo, task, self.client.scatter(data, hash=False), pure=False,
+                                  key=f"bokehfit-survey-{task.sha256[:16]}-{time.monotonic_ns()}")
+
+    def wait(self, futures):
+        return self.distributed.wait(list(futures), return_when="FIRST_COMPLETED").done
+
+    def crashed(self, error: BaseException) -> bool:
+        return False  # Dask reschedules a lost worker's tasks itself; KilledWorker ends up as an error row
+
+    def close(self, interrupted: bool) -> None:
+        if self.own_client:
+            self.client.close()
+
+
+def run_survey(
+    photos: list[Path],
+    store: SurveyStore,
+    *,
+    options: dict | None = None,
+    jobs: int = 1,
+    scheduler=None,
+    timeout_s: float | None = None,
+    html: bool = True,
+    retry_failed: bool = False,
+    command_line: str = "",
+    adapter=None,
+    progress: bool | None = None,
+    connect_timeout_s: float = 30.0,
+    on_result: Callable[[dict], None] | None = None,
+) -> SurveyRun:
+    """Survey ``photos`` into ``store``; see :func:`bokehfit.survey.survey` for the parameters.
+
+    Ctrl-C stops handing out photos, keeps every result stored so far and returns
+    the run with ``interrupted`` set.
+    """
+    started = time.perf_counter()
+    options = dict(options or {})
+    run = SurveyRun(found=len(photos))
+    known = store.statuses()
+    tasks: dict[str, PhotoTask] = {}
+    sizes: dict[str, int | None] = {}
+    keeper = _Keeper(store, sizes)
+    for path in photos:
+        try:
+            sha256 = content_hash(path)
+            sizes[sha256] = path.stat().st_size
+        except OSError as error:  # can't even be read: a row keyed by its path
+            sha256 = f"path:{os.path.abspath(path)}"
+            if sha256 not in known or retry_failed:
+                task = PhotoTask(str(path), sha256)
+                run.statuses[keeper.keep(_failure(task, "unreadable", f"can't read the file: {error.strerror or error}"))] += 1
+                run.done += 1
+            else:
+                run.skipped += 1
+            continue
+        status = known.get(sha256)
+        if sha256 in tasks or (status is not None and not (retry_failed and status in FAILURE_STATUSES)):
+            run.skipped += 1
+            continue
+        tasks[sha256] = PhotoTask(str(path), sha256, options, command_line, html, timeout_s)
+    if not tasks:
+        run.seconds = time.perf_counter() - started
+        return run
+
+    engine = _LocalEngine(jobs, adapter) if scheduler is None else _DaskEngine(scheduler, adapter, connect_timeout_s)
+    bar = None
+    if progress if progress is not None else sys.stderr.isatty():
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(tasks), unit="photo", desc="survey", file=sys.stderr, smoothing=0.1)
+    waiting = collections.deque(tasks.values())
+    in_flight: dict = {}
+    crashes: collections.Counter = collections.Counter()
+    try:
+        while waiting or in_flight:
+            while waiting and len(in_flight) < IN_FLIGHT_PER_WORKER * engine.workers:
+                task = waiting.popleft()
+                in_flight[engine.submit(task)] = task
+            for future in engine.wait(in_flight):
+                task = in_flight.pop(future)
+                try:
+                    record = future.result()
+                except Exception as error:  # the worker, not the photo, failed
+                    if engine.crashed(error):
+                        # every task of the broken pool failed with it: those that ran may be the cause
+                        for other in [task, *in_flight.values()]:
+                            crashes[other.sha256] += 1
+                        lost, in_flight = [task, *in_flight.values()], {}
+                        for other in reversed(lost):
+                            if crashes[other.sha256] >= MAX_WORKER_CRASHES:
+                                record = _failure(other, "error", "the worker process died while surveying this photo")
+                                run.statuses[keeper.keep(record)] += 1
+                                run.done += 1
+                                if bar is not None:
+                                    bar.update()
+                            else:
+                                waiting.appendleft(other)
+                        break
+                    record = _failure(task, "error", f"{type(error).__name__}: {' '.join(str(error).split())}")
+                run.statuses[keeper.keep(record)] += 1
+                run.done += 1
+                if on_result is not None:
+                    on_result(record)
+                if bar is not None:
+                    bar.update()
+                    bar.set_postfix_str(", ".join(f"{s} {n}" for s, n in sorted(run.statuses.items())), refresh=False)
+    except KeyboardInterrupt:
+        run.interrupted = True
+        for future in in_flight:
+            future.cancel()
+    finally:
+        if bar is not None:
+            bar.close()
+        engine.close(run.interrupted)
+        run.seconds = time.perf_counter() - started
+    return run

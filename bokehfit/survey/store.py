@@ -1,0 +1,248 @@
+"""The survey database: one DuckDB file, one row per photo, keyed by the file's SHA-256.
+
+DuckDB rather than SQLite: the table is read as columns (the report groups and
+aggregates, the API returns an Arrow table, the export is Parquet), which is
+what DuckDB is built for and has built in, with no pandas in between. The
+parent process is the database's only writer and commits each row in its own
+transaction as the photo's result arrives; DuckDB's write-ahead log makes a
+committed row survive a killed process (it is replayed on the next open).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from datetime import datetime, timezone
+from pathlib import Path
+
+from bokehfit import __version__
+from bokehfit.errors import InputError
+
+__all__ = ["SURVEY_SCHEMA_VERSION", "DB_SUFFIXES", "COLUMNS", "SurveyStore", "reports_folder", "row_from_record"]
+
+#: Version of the ``photos`` table's layout; columns are added, never renamed, within one version.
+SURVEY_SCHEMA_VERSION = 1
+DB_SUFFIXES = (".duckdb", ".db")
+
+#: The ``photos`` table: name and DuckDB type of each column, in order.
+COLUMNS = (
+    ("sha256", "VARCHAR PRIMARY KEY"),
+    ("path", "VARCHAR NOT NULL"),
+    ("size_bytes", "BIGINT"),
+    ("status", "VARCHAR NOT NULL"),
+    ("reason", "VARCHAR"),
+    ("camera", "VARCHAR"),
+    ("lens", "VARCHAR"),
+    ("exif_fnumber", "DOUBLE"),
+    ("focal_length_mm", "DOUBLE"),
+    ("width", "INTEGER"),
+    ("height", "INTEGER"),
+    ("shape", "VARCHAR"),
+    ("blades", "INTEGER"),
+    ("angle_deg", "DOUBLE"),
+    ("symmetry_deg", "DOUBLE"),
+    ("diameter_px", "DOUBLE"),
+    ("fstop", "DOUBLE"),
+    ("fstop_uncertainty", "DOUBLE"),
+    ("focus_side", "VARCHAR"),
+    ("roundness", "DOUBLE"),
+    ("squeeze", "DOUBLE"),
+    ("vignetting_radius", "DOUBLE"),
+    ("vignetting_shift", "DOUBLE"),
+    ("rim", "DOUBLE"),
+    ("chromatic_red", "DOUBLE"),
+    ("chromatic_blue", "DOUBLE"),
+    ("discs_found", "INTEGER"),
+    ("discs_fitted", "INTEGER"),
+    ("iou", "DOUBLE"),
+    ("json_path", "VARCHAR"),
+    ("html_path", "VARCHAR"),
+    ("warnings", "VARCHAR"),
+    ("seconds", "DOUBLE"),
+    ("worker", "VARCHAR"),
+    ("finished_at", "TIMESTAMP"),
+    ("bokehfit_version", "VARCHAR"),
+    ("result", "VARCHAR"),
+    ("thumbnail", "BLOB"),
+)
+_NAMES = [name for name, _ in COLUMNS]
+#: Columns left out of the table that :meth:`SurveyStore.table` returns and the Parquet export.
+_BULKY = ("result", "thumbnail")
+
+
+def reports_folder(db_path: str | os.PathLike) -> Path:
+    """Where the per-photo compare JSON and HTML go: ``NAME_reports/`` beside ``NAME.duckdb``."""
+    db_path = Path(db_path)
+    return db_path.with_name(f"{db_path.stem}_reports")
+
+
+def _number(value):
+    return float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else None
+
+
+def _part(value, key):
+    """``value[key]`` of an object-valued real-lens key (vignetting, chromatic), None when not fitted."""
+    return _number(value.get(key)) if isinstance(value, dict) else None
+
+
+def row_from_record(record: dict, *, size_bytes: int | None, json_path: str | None, html_path: str | None) -> dict:
+    """A ``photos`` row (column name → value) from a worker's record (:func:`bokehfit.survey.work.survey_photo`)."""
+    document = record.get("document") or {}
+    source = document.get("input") or {}
+    exif = source.get("exif") or {}
+    aperture = document.get("aperture") or {}
+    discs = document.get("discs") or []
+    metrics = document.get("metrics") or {}
+    blades = aperture.get("blades")
+    return {
+        "sha256": record["sha256"],
+        "path": record["path"],
+        "size_bytes": size_bytes,
+        "status": record["status"],
+        "reason": record.get("reason"),
+        "camera": exif.get("camera"),
+        "lens": exif.get("lens"),
+        "exif_fnumber": _number(exif.get("fnumber")),
+        "focal_length_mm": _number(exif.get("focal_length_mm")),
+        "width": source.get("width"),
+        "height": source.get("height"),
+        "shape": aperture.get("shape"),
+        "blades": blades if isinstance(blades, int) else None,
+        "angle_deg": _number(aperture.get("angle_deg")),
+        "symmetry_deg": _number(aperture.get("symmetry_deg")),
+        "diameter_px": _number(aperture.get("diameter_px")),
+        "fstop": _number(aperture.get("fstop")),
+        "fstop_uncertainty": _number(aperture.get("fstop_uncertainty")),
+        "focus_side": aperture.get("focus_side"),
+        "roundness": _number(aperture.get("roundness")),
+        "squeeze": _number(aperture.get("squeeze")),
+        "vignetting_radius": _part(aperture.get("vignetting"), "radius"),
+        "vignetting_shift": _part(aperture.get("vignetting"), "shift"),
+        "rim": _number(aperture.get("rim")),
+        "chromatic_red": _part(aperture.get("chromatic"), "red"),
+        "chromatic_blue": _part(aperture.get("chromatic"), "blue"),
+        "discs_found": len(discs) if document else None,
+        "discs_fitted": aperture.get("discs_fitted") if document else None,
+        "iou": _number(metrics.get("iou")),
+        "json_path": json_path,
+        "html_path": html_path,
+        "warnings": "\n".join(record.get("warnings") or []) or None,
+        "seconds": _number(record.get("seconds")),
+        "worker": record.get("worker"),
+        "finished_at": datetime.now(timezone.utc).replace(tzinfo=None),
+        "bokehfit_version": __version__,
+        "result": json.dumps(document, allow_nan=False) if document else None,
+        "thumbnail": record.get("thumbnail"),
+    }
+
+
+class SurveyStore:
+    """The open survey database (a context manager; closing checkpoints it).
+
+    Parameters
+    ----------
+    path : str or path-like
+        ``NAME.duckdb`` (or ``.db``); created with its table if missing. An
+        existing file must be a survey database that bokehfit made.
+    read_only : bool
+        Open for reading (the report, the API's table) without taking the write lock.
+
+    Raises
+    ------
+    InputError
+        Naming ``--db`` when the file is not a DuckDB database, is another
+        program's database, is in use by another survey, or can't be created.
+    """
+
+    def __init__(self, path: str | os.PathLike, *, read_only: bool = False):
+        import duckdb
+
+        self.path = Path(path)
+        if self.path.suffix.lower() not in DB_SUFFIXES:
+            raise InputError(f"--db must end in {', '.join(DB_SUFFIXES)} (got {str(self.path)!r})")
+        if read_only and not self.path.is_file():
+            raise InputError(f"--db {str(self.path)!r} does not exist (run a survey into it first)")
+        if not self.path.parent.is_dir():
+            raise InputError(f"--db folder {str(self.path.parent)!r} does not exist")
+        existed = self.path.exists()
+        try:
+            self.connection = duckdb.connect(str(self.path), read_only=read_only)
+        except duckdb.Error as error:
+            raise InputError(f"--db {str(self.path)!r} can't be opened as a survey database: {' '.join(str(error).split())}") from None
+        try:
+            self._check_or_create(existed, read_only)
+        except BaseException:
+            self.connection.close()
+            raise
+
+    def _check_or_create(self, existed: bool, read_only: bool) -> None:
+        tables = {row[0] for row in self.connection.execute("SELECT table_name FROM information_schema.tables").fetchall()}
+        if "survey_meta" in tables:
+            meta = dict(self.connection.execute("SELECT key, value FROM survey_meta").fetchall())
+            version = meta.get("schema_version")
+            if version != str(SURVEY_SCHEMA_VERSION):
+                raise InputError(
+                    f"--db {str(self.path)!r} is a survey database of schema {version}; this bokehfit reads schema "
+                    f"{SURVEY_SCHEMA_VERSION}: start a new database"
+                )
+            return
+        if tables or (existed and read_only):
+            raise InputError(f"--db {str(self.path)!r} is a DuckDB database that bokehfit did not make; choose another name")
+        columns = ", ".join(f"{name} {kind}" for name, kind in COLUMNS)
+        self.connection.execute("BEGIN TRANSACTION")
+        self.connection.execute("CREATE TABLE survey_meta (key VARCHAR PRIMARY KEY, value VARCHAR)")
+        self.connection.executemany(
+            "INSERT INTO survey_meta VALUES (?, ?)",
+            [["schema_version", str(SURVEY_SCHEMA_VERSION)], ["created_by", f"bokehfit {__version__}"]],
+        )
+        self.connection.execute(f"CREATE TABLE photos ({columns})")
+        self.connection.execute("COMMIT")
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+        return False
+
+    def close(self) -> None:
+        """Checkpoint (fold the log into the file) and close; safe to call twice."""
+        if self.connection is not None:
+            import duckdb
+
+            try:
+                self.connection.execute("CHECKPOINT")
+            except duckdb.Error:
+                pass  # read-only, or nothing to fold in
+            self.connection.close()
+            self.connection = None
+
+    def put(self, row: dict) -> None:
+        """Store one photo's row (replacing an earlier row of the same photo), in its own transaction."""
+        placeholders = ", ".join("?" for _ in _NAMES)
+        self.connection.execute("BEGIN TRANSACTION")
+        try:
+            self.connection.execute(
+                f"INSERT OR REPLACE INTO photos ({', '.join(_NAMES)}) VALUES ({placeholders})", [row[name] for name in _NAMES]
+            )
+        except BaseException:
+            self.connection.execute("ROLLBACK")
+            raise
+        self.connection.execute("COMMIT")
+
+    def statuses(self) -> dict[str, str]:
+        """sha256 → status of every photo stored."""
+        return dict(self.connection.execute("SELECT sha256, status FROM photos").fetchall())
+
+    def count(self) -> int:
+        return self.connection.execute("SELECT count(*) FROM photos").fetchone()[0]
+
+    def table(self, *, bulky: bool = False):
+        """The ``photos`` table as a ``pyarrow.Table`` ordered by path (without ``result`` and ``thumbnail`` unless ``bulky``)."""
+        names = _NAMES if bulky else [name for name in _NAMES if name not in _BULKY]
+        return self.connection.sql(f"SELECT {', '.join(names)} FROM photos ORDER BY path, sha256").to_arrow_table()
+
+    def thumbnails(self) -> dict[str, bytes]:
+        """sha256 → JPEG thumbnail of the photos that have one."""
+        rows = self.connection.execute("SELECT sha256, thumbnail FROM photos WHERE thumbnail IS NOT NULL").fetchall()
+        return {sha: bytes(data) for sha, data in rows}

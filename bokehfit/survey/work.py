@@ -1,0 +1,171 @@
+"""One photo of a survey, as a worker process (local pool or Dask worker) runs it.
+
+The worker never writes anything: it returns a plain dict (picklable, small)
+that the parent stores. Every outcome is a record: compare's four statuses,
+and three of the survey's own (:data:`FAILURE_STATUSES`).
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import tempfile
+import threading
+import time
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+__all__ = ["PhotoTask", "FAILURE_STATUSES", "STATUSES", "init_worker", "survey_photo", "THUMBNAIL_PX"]
+
+#: Statuses of a survey row besides compare's (design.md §7b): the file could not be read as a
+#: photo, compare raised (a bug or a lost GPU), or it ran past the per-photo time limit.
+FAILURE_STATUSES = ("unreadable", "error", "timeout")
+#: Every status a row can have: compare's, then the survey's own.
+STATUSES = ("fitted", "unsure", "no_fit", "no_discs", *FAILURE_STATUSES)
+#: Long side of the thumbnails kept in the database for the report.
+THUMBNAIL_PX = 192
+_THUMBNAIL_QUALITY = 80
+
+
+@dataclass(frozen=True)
+class PhotoTask:
+    """What a worker needs for one photo.
+
+    ``options`` are :func:`bokehfit.compare.compare_photo`'s
+    keyword arguments; ``timeout_s`` is the per-photo limit (None: no limit).
+    """
+
+    path: str
+    sha256: str
+    options: dict = field(default_factory=dict)
+    command_line: str = ""
+    html: bool = True
+    timeout_s: float | None = None
+
+
+class PhotoTimeout(Exception):
+    """A photo ran past its time limit."""
+
+
+def init_worker(adapter=None, ignore_sigint: bool = True) -> None:
+    """Per-process start-up: import bokehfit's pipeline and open the GPU once.
+
+    In a local pool the worker also ignores SIGINT: Ctrl-C reaches the whole
+    process group and the parent alone decides what stops.
+    """
+    if ignore_sigint and threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    import bokehfit.compare  # noqa: F401  (the pipeline, imported once per process)
+    import bokehfit.report.html  # noqa: F401
+    from bokehfit.errors import GPUUnavailableError
+    from bokehfit.gpu import get_gpu
+
+    try:
+        get_gpu(adapter)
+    except GPUUnavailableError:
+        pass  # each photo's compare reports it
+
+
+class _Deadline:
+    """SIGALRM after ``seconds`` raises :class:`PhotoTimeout` (main thread of a POSIX process only)."""
+
+    def __init__(self, seconds: float | None):
+        self.active = bool(seconds) and hasattr(signal, "setitimer") and threading.current_thread() is threading.main_thread()
+        self.seconds = seconds
+
+    def __enter__(self):
+        if self.active:
+            def expire(signum, frame):
+                raise PhotoTimeout(f"stopped after the per-photo limit of {self.seconds:g} s")
+
+            self.previous = signal.signal(signal.SIGALRM, expire)
+            signal.setitimer(signal.ITIMER_REAL, self.seconds)
+        return self
+
+    def __exit__(self, *exc):
+        if self.active:
+            signal.setitimer(signal.ITIMER_REAL, 0)
+            signal.signal(signal.SIGALRM, self.previous)
+        return False
+
+
+def _thumbnail(display) -> bytes | None:
+    """A small JPEG of the photo as displayed (RGB uint8), for the survey report."""
+    import cv2
+
+    height, width = display.shape[:2]
+    scale = min(1.0, THUMBNAIL_PX / max(height, width))
+    size = (max(1, round(width * scale)), max(1, round(height * scale)))
+    small = cv2.resize(display, size, interpolation=cv2.INTER_AREA) if scale < 1.0 else display
+    ok, encoded = cv2.imencode(".jpg", cv2.cvtColor(small, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, _THUMBNAIL_QUALITY])
+    return encoded.tobytes() if ok else None
+
+
+def _one_line(error: BaseException) -> str:
+    text = " ".join(str(error).split()) or type(error).__name__
+    return text if len(text) <= 500 else text[:497] + "..."
+
+
+def _compare(task: PhotoTask, path: str) -> dict:
+    from bokehfit.compare import compare_photo
+    from bokehfit.report.html import build_html
+
+    comparison = compare_photo(path, **task.options)
+    document = comparison.to_json(task.command_line)
+    document["input"]["path"] = task.path
+    return {
+        "status": comparison.status,
+        "reason": comparison.reason,
+        "document": document,
+        "html": build_html(comparison, task.command_line) if task.html else None,
+        "thumbnail": _thumbnail(comparison.photo.display),
+    }
+
+
+def survey_photo(task: PhotoTask, data: bytes | None = None) -> dict:
+    """Run compare on one photo and return its record; never raises for the photo's sake.
+
+    Parameters
+    ----------
+    task : PhotoTask
+        The photo and how to compare it.
+    data : bytes, optional
+        The file's bytes, where the worker can't be assumed to see the parent's
+        files (a Dask cluster); they are written under the photo's own name in a
+        private temporary folder. None: the worker reads ``task.path``.
+
+    Returns
+    -------
+    dict
+        ``sha256``, ``path``, ``status`` (one of :data:`STATUSES`), ``reason``
+        (None when fitted), ``document`` (compare's JSON, None for the survey's
+        own statuses), ``html`` (the report, or None), ``thumbnail`` (JPEG bytes
+        or None), ``warnings`` (list of str), ``seconds``, ``worker`` (host:pid).
+    """
+    from bokehfit.errors import InputError
+
+    started = time.perf_counter()
+    record = {"sha256": task.sha256, "path": task.path, "document": None, "html": None, "thumbnail": None}
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            with _Deadline(task.timeout_s), tempfile.TemporaryDirectory(prefix="bokehfit-survey-") as scratch:
+                path = task.path
+                if data is not None:
+                    path = os.path.join(scratch, Path(task.path).name)
+                    Path(path).write_bytes(data)
+                record.update(_compare(task, path))
+        except PhotoTimeout as error:
+            record.update(status="timeout", reason=_one_line(error))
+        except InputError as error:
+            record.update(status="unreadable", reason=_one_line(error))
+        except Exception as error:  # a photo's failure is a row, never the survey's end
+            record.update(status="error", reason=f"{type(error).__name__}: {_one_line(error)}")
+    record["warnings"] = sorted({_one_line(w.message) for w in caught})
+    record["seconds"] = time.perf_counter() - started
+    record["worker"] = f"{os.uname().nodename}:{os.getpid()}" if hasattr(os, "uname") else str(os.getpid())
+    if record["status"] not in STATUSES:  # compare gained a status this module does not know
+        record["reason"] = f"unknown status {record['status']!r}: {record['reason']}"
+        record["status"] = "error"
+    return record

@@ -1,0 +1,205 @@
+"""The disc finder on what real photos hold: saturated, overlapping, occluded, large
+and faint, and ring-shaped discs, and things that are not discs.
+
+The photos here are drawn with OpenCV (filled circles and polygons, Gaussian blur,
+clipping), not with bokehfit's kernels, so the finder is not tested against its own model.
+
+Thresholds (stated once, asserted below):
+- diameter within DIAMETER_TOL_REL of the drawn one, centre within CENTRE_TOL_PX;
+- a disc overlapped by its neighbours shows between OVERLAP_SEEN_RANGE of its outline as its own;
+- a saturated disc's 50 % outline lies outside the true edge, by at most CLIP_SHIFT_SIGMA blur sigmas:
+  a blurred edge of height A clipped at c reaches c/2 at σ·Φ⁻¹(1 − c/(2A)) outside the edge (A = 4c: 1.15 σ).
+  The outline keeps the shape; the fit with the clipping in its model recovers the size.
+"""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+import pytest
+
+from bokehfit.discs import FULL_OUTLINE_SEEN, find_discs
+
+DIAMETER_TOL_REL = 0.03
+CENTRE_TOL_PX = 1.0
+#: Three discs of diameter d in a row, d·0.8 apart: the middle one shows about 2·(1 − 2·0.41/π) ≈ 0.48
+#: of its outline, the outer ones about 0.74; a margin either way.
+OVERLAP_SEEN_RANGE = (0.35, 0.9)
+CLIP_SHIFT_SIGMA = 1.5
+#: Subpixel drawing: OpenCV's shift argument (coordinates in 1/16 px).
+SHIFT = 4
+
+
+def drawn_diameter(diameter):
+    """Equal-area diameter of the filled circle :func:`draw_disc` draws for ``diameter`` (OpenCV's
+    anti-aliased circles come out about a pixel wider than asked)."""
+    layer = draw_disc(np.zeros((int(diameter) + 20,) * 2, np.float32), ((diameter + 19) / 2,) * 2, diameter, 1.0)
+    return 2.0 * math.sqrt(float(layer.sum()) / math.pi)
+
+
+def draw_disc(image, centre, diameter, value, *, thickness=-1):
+    """Add a filled (or, with ``thickness`` > 0, a ring) circle of ``value`` to ``image`` (anti-aliased)."""
+    layer = np.zeros_like(image)
+    scale = 1 << SHIFT
+    cv2.circle(
+        layer,
+        (round(centre[0] * scale), round(centre[1] * scale)),
+        round(diameter / 2 * scale),
+        float(value),
+        thickness=thickness,
+        lineType=cv2.LINE_AA,
+        shift=SHIFT,
+    )
+    return image + layer
+
+
+def finish(image, *, blur=1.0, noise=0.003, clip=None, seed=0):
+    """Blur (the lens), noise (the sensor) and clipping (the file); returns luminance and the clipped mask."""
+    image = cv2.GaussianBlur(image, (0, 0), blur) if blur else image
+    image = image + np.random.default_rng(seed).normal(0.0, noise, image.shape).astype(np.float32)
+    if clip is None:
+        return image, None
+    return np.minimum(image, clip), image >= clip
+
+
+def nearest(discs, centre):
+    return min(discs, key=lambda d: math.hypot(d.center_xy[0] - centre[0], d.center_xy[1] - centre[1]), default=None)
+
+
+def assert_measured(disc, centre, diameter):
+    diameter = drawn_diameter(diameter)
+    assert disc is not None
+    offset = math.hypot(disc.center_xy[0] - centre[0], disc.center_xy[1] - centre[1])
+    assert offset <= CENTRE_TOL_PX, f"centre off by {offset:.2f} px"
+    assert abs(disc.diameter_px - diameter) <= DIAMETER_TOL_REL * diameter, f"diameter {disc.diameter_px:.2f} for {diameter}"
+
+
+def test_saturated_disc_is_kept_as_edge_evidence():
+    image = np.full((200, 300), 0.05, dtype=np.float32)
+    image = draw_disc(image, (90.3, 100.6), 70, 4.0)  # clipped four times over
+    image = draw_disc(image, (215.2, 98.9), 60, 0.5)  # clean
+    blur = 1.0
+    luminance, clipped = finish(image, blur=blur, clip=1.0)
+    search = find_discs(luminance, clipped)
+    hot, clean = nearest(search.discs, (90.3, 100.6)), nearest(search.discs, (215.2, 98.9))
+    assert hot is not None and math.hypot(hot.center_xy[0] - 90.3, hot.center_xy[1] - 100.6) <= CENTRE_TOL_PX
+    assert drawn_diameter(70) <= hot.diameter_px <= drawn_diameter(70) + 2.0 * CLIP_SHIFT_SIGMA * blur, hot.diameter_px
+    assert hot.saturated and hot.evidence == "edge" and hot.clipped_share > 0.8
+    assert hot.outline_seen >= FULL_OUTLINE_SEEN and hot.shape_usable and not hot.usable
+    assert_measured(clean, (215.2, 98.9), 60)
+    assert not clean.saturated and clean.evidence == "plateau" and clean.clipped_share == 0.0 and clean.usable
+
+
+def test_bloom_into_clipped_light_marks_the_outline_unseen():
+    image = np.full((200, 260), 0.05, dtype=np.float32)
+    image = draw_disc(image, (120.0, 100.0), 80, 4.0)
+    luminance, clipped = finish(image, clip=1.0)
+    # A red light beside the disc's right side: dim in luminance, clipped in its red channel.
+    luminance[60:140, 161:175] += 0.2
+    clipped[60:140, 161:175] = True
+    search = find_discs(luminance, clipped)
+    disc = nearest(search.discs, (120.0, 100.0))
+    assert disc is not None and disc.saturated, search.rejected
+    assert disc.evidence == "partial" and 0.5 < disc.outline_seen < FULL_OUTLINE_SEEN
+    unseen = disc.outline_xy[~disc.outline_reliable]
+    assert unseen[:, 0].min() > 140.0  # only the stretch next to the streak
+
+
+def test_overlapping_discs_are_split_into_a_cluster():
+    centres = [(80.4, 100.2), (136.1, 100.7), (191.8, 99.6)]
+    image = np.full((200, 280), 0.04, dtype=np.float32)
+    for (x, y), value in zip(centres, (0.5, 0.6, 0.45)):
+        image = draw_disc(image, (x, y), 70, value)
+    luminance, _ = finish(image)
+    search = find_discs(luminance)
+    found = [nearest(search.discs, c) for c in centres]
+    assert len({id(d) for d in found}) == 3, [d.center_xy for d in search.discs]
+    for disc, centre in zip(found, centres):
+        offset = math.hypot(disc.center_xy[0] - centre[0], disc.center_xy[1] - centre[1])
+        assert offset <= 4.0, f"centre off by {offset:.1f} px"
+        assert disc.evidence == "partial" and disc.overlaps and not disc.usable
+        assert OVERLAP_SEEN_RANGE[0] <= disc.outline_seen <= OVERLAP_SEEN_RANGE[1], disc.outline_seen
+    assert found[0].cluster is not None and found[0].cluster == found[1].cluster == found[2].cluster
+    # The middle disc's own outline: only its top and bottom arcs, not the lenses shared with its neighbours.
+    middle = found[1]
+    own = middle.outline_xy[middle.outline_reliable]
+    assert np.all(np.abs(own[:, 0] - centres[1][0]) < 0.5 * 56.0)
+
+
+def test_disc_crossed_by_a_branch_is_kept_with_the_crossing_unseen():
+    centre = (120.3, 110.8)
+    image = np.full((220, 240), 0.04, dtype=np.float32)
+    image = draw_disc(image, centre, 90, 0.6)
+    branch = np.zeros_like(image)
+    cv2.line(branch, (20, 30), (220, 190), 1.0, thickness=5, lineType=cv2.LINE_AA)
+    image = image * (1.0 - branch) + 0.02 * branch  # the in-focus branch hides the disc behind it
+    luminance, _ = finish(image, blur=0.0)
+    search = find_discs(luminance)
+    near = [d for d in search.discs if math.hypot(d.center_xy[0] - centre[0], d.center_xy[1] - centre[1]) < 45]
+    assert len(near) == 1, [(d.center_xy, d.diameter_px) for d in near]  # one disc, not its two halves
+    disc = near[0]
+    assert_measured(disc, centre, 90)
+    assert disc.occluded and disc.evidence == "partial" and 0.8 < disc.outline_seen < FULL_OUTLINE_SEEN
+    assert disc.shape_usable and not disc.usable
+    # The unseen points are where the branch crosses the outline, nowhere else.
+    unseen = disc.outline_xy[~disc.outline_reliable]
+    to_line = np.abs((unseen[:, 1] - 30) * 200 - (unseen[:, 0] - 20) * 160) / math.hypot(200, 160)
+    assert to_line.max() < 8.0
+
+
+@pytest.mark.parametrize("contrast", [0.05, 0.1, 0.2])
+def test_large_faint_discs_over_a_bright_background(contrast):
+    height, width = 2000, 3000
+    rows, cols = np.mgrid[0:height, 0:width].astype(np.float32)
+    vignetting = ((cols - width / 2) ** 2 + (rows - height / 2) ** 2) / ((width / 2) ** 2 + (height / 2) ** 2)
+    background = 0.4 + 0.15 * cols / width - 0.1 * vignetting  # smooth bright haze, darker at the corners
+    discs = [((600.4, 640.2), 160.0), ((1700.7, 960.3), 300.0), ((2400.2, 1400.6), 420.0), ((700.3, 1500.8), 480.0)]
+    image = background.astype(np.float32)
+    for (x, y), diameter in discs:
+        image = image + draw_disc(np.zeros_like(image), (x, y), diameter, contrast * background[round(y), round(x)])
+    luminance, _ = finish(image, blur=2.0, noise=0.004)
+    search = find_discs(luminance)
+    for centre, diameter in discs:
+        assert_measured(nearest(search.discs, centre), centre, diameter)
+
+
+def test_ring_discs_are_measured_by_their_outer_outline():
+    image = np.full((200, 300), 0.03, dtype=np.float32)
+    rings = [((70.2, 100.4), 36.0), ((160.6, 99.1), 44.0)]
+    for centre, diameter in rings:
+        image = draw_disc(image, centre, diameter - 3.0, 0.5, thickness=3)  # a 3-px rim, outer edge at the diameter
+        image = draw_disc(image, centre, diameter - 5.0, 0.05)  # a dim centre
+    image = draw_disc(image, (245.3, 100.7), 40.0, 0.4)  # a plain disc
+    luminance, _ = finish(image, blur=0.7)
+    search = find_discs(luminance)
+    for centre, diameter in rings:
+        disc = nearest(search.discs, centre)
+        assert disc is not None and disc.ring and disc.evidence == "edge", search.rejected
+        offset = math.hypot(disc.center_xy[0] - centre[0], disc.center_xy[1] - centre[1])
+        assert offset <= CENTRE_TOL_PX and abs(disc.diameter_px - diameter) <= 0.06 * diameter, disc.diameter_px
+    plain = nearest(search.discs, (245.3, 100.7))
+    assert plain is not None and not plain.ring and plain.evidence == "plateau"
+
+
+def test_not_discs_are_refused_with_a_reason_each():
+    image = np.full((300, 400), 0.04, dtype=np.float32)
+    wave = [(30 + t, 110 + 30 * math.sin(t / 30.0)) for t in np.linspace(0, 60 * math.pi, 100)]  # its centre on it
+    cv2.polylines(image, [np.round(np.array(wave) * 16).astype(np.int32)], False, 0.7, 2, cv2.LINE_AA, 4)  # a wavy glint
+    cv2.line(image, (30, 260), (370, 250), 0.6, thickness=3, lineType=cv2.LINE_AA)  # a lit stem
+    petals = [
+        (320 + r * math.cos(t), 100 + r * math.sin(t))
+        for t, r in zip(np.linspace(0, 2 * math.pi, 48, endpoint=False), np.tile([55, 55, 15, 15], 12))
+    ]
+    cv2.fillPoly(image, [np.round(np.array(petals) * 16).astype(np.int32)], 0.6, lineType=cv2.LINE_AA, shift=4)  # a flower
+    luminance, _ = finish(image, blur=0.8)
+    search = find_discs(luminance)
+    assert not search, [(d.center_xy, d.diameter_px) for d in search.discs]
+    reasons = {r.rejected_because for r in search.rejections}
+    assert {"line-like", "elongated", "not compact"} <= reasons, search.rejected
+    for reason, count in search.rejected.items():
+        if reason != "beyond the candidate limit":
+            assert sum(r.rejected_because == reason for r in search.rejections) == count
+    flower = [r for r in search.rejections if math.hypot(r.center_xy[0] - 320, r.center_xy[1] - 100) < 20]
+    assert "not compact" in {r.rejected_because for r in flower}

@@ -1,0 +1,305 @@
+"""The custom ``mask`` aperture (design.md §3b): table, sampler and its WGSL twin, kernels, command line."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from PIL import Image
+from scipy.stats import chisquare
+
+from bokehfit.apertures import MaskTable, invert_mask_sample, load_mask, make_aperture, mask_pdf, sample_mask
+from bokehfit.cli import main
+from bokehfit.errors import InputError
+from bokehfit.fit.families import FAMILIES
+from bokehfit.kernels import compute_kernel, render_kernel
+from bokehfit.kernels.exact import mask_coverage
+
+#: Significance level of the chi-square tests.
+SIGNIFICANCE = 1e-3
+#: Samples of the chi-square tests.
+CHI2_SAMPLES = 200_000
+#: Sub-cells a side per mask cell of the sub-cell test: odd, so no bin border sits on a cell's middle.
+SUB_CELLS = 3
+#: float32 agreement of the WGSL twin, relative to the mask's extent.
+TWIN_ATOL = 2e-6
+
+
+def ring_mask(size: int = 9, centre: float = 0.2) -> np.ndarray:
+    """A small asymmetric test mask: a grey disc, a dim centre cell, one corner cut off, transmission in [0, 1]."""
+    yy, xx = np.mgrid[0:size, 0:size]
+    r2 = (xx - size // 2) ** 2 + (yy - size // 2) ** 2
+    t = np.where(r2 <= (size // 2) ** 2, 0.9, 0.0)
+    t[size // 2, size // 2] = centre
+    t[: size // 3, : size // 3] = 0.0
+    t[size - 2, size // 2] = 1.0
+    return t
+
+
+def separable_coverage(t: np.ndarray, cell: float, scale: float, size: int) -> np.ndarray:
+    """Exact kernel of an unrotated mask by 1-D overlaps: light = A_y · t · A_xᵀ (independent of mask_coverage)."""
+    h, w = t.shape
+    edges = np.arange(size + 1) - 0.5 - (size - 1) / 2.0
+    cols = (np.arange(w + 1) - w / 2.0) * cell * scale
+    rows = (h / 2.0 - np.arange(h + 1)) * cell * scale  # image rows run down
+
+    def overlap(pixels, cells):
+        lo = np.maximum(np.minimum(pixels[:-1], pixels[1:])[:, None], np.minimum(cells[:-1], cells[1:])[None])
+        hi = np.minimum(np.maximum(pixels[:-1], pixels[1:])[:, None], np.maximum(cells[:-1], cells[1:])[None])
+        return np.maximum(hi - lo, 0.0)
+
+    return overlap(-edges, rows) @ t @ overlap(edges, cols).T
+
+
+# --- the table ------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "image,why",
+    [
+        (np.zeros((4, 4)), "transmit some light"),
+        (np.full((4, 4), 1.5), r"in \[0, 1\]"),
+        (np.array([[np.nan, 1.0]]), "finite"),
+        (np.ones((2, 2, 2)), "2-D"),
+        (np.ones((1025, 4)), "at most 1024"),
+    ],
+)
+def test_bad_mask_is_refused_naming_mask(image, why):
+    with pytest.raises(InputError, match=rf"^mask .*{why}"):
+        MaskTable.from_array(image)
+
+
+def test_mask_shape_needs_a_mask_and_others_refuse_one():
+    with pytest.raises(InputError, match="^mask is required"):
+        make_aperture("mask")
+    with pytest.raises(InputError, match="^mask applies only to shape 'mask'"):
+        make_aperture("hexagon", mask=ring_mask())
+    with pytest.raises(InputError, match="^rim does not apply"):
+        make_aperture("mask", mask=ring_mask(), rim=0.3)
+
+
+def test_unit_transmitted_area_and_content_hash():
+    t = ring_mask()
+    table = MaskTable.from_array(t)
+    assert float(np.sum(table.transmission) * table.cell**2) == pytest.approx(1.0, abs=1e-12)
+    assert make_aperture("mask", 10, mask=t) == make_aperture("mask", 10, mask=t.copy())
+    assert hash(make_aperture("mask", 10, mask=t)) == hash(make_aperture("mask", 10, mask=t.copy()))
+    other = t.copy()
+    other[4, 4] = 0.3
+    assert make_aperture("mask", mask=other) != make_aperture("mask", mask=t)
+
+
+@pytest.mark.parametrize("mode", ["L", "I;16", "RGB"])
+def test_png_8_and_16_bit_and_rgb_luminance(tmp_path, mode):
+    t = ring_mask()
+    path = tmp_path / "mask.png"
+    if mode == "L":
+        Image.fromarray(np.round(t * 255).astype(np.uint8), "L").save(path)
+        expected = np.round(t * 255) / 255
+    elif mode == "I;16":
+        Image.fromarray(np.round(t * 65535).astype(np.uint16)).save(path)
+        expected = np.round(t * 65535) / 65535
+    else:  # red only: luminance 299/1000 of it (ITU-R 601-2)
+        rgb = np.zeros(t.shape + (3,), dtype=np.uint8)
+        rgb[..., 0] = 255 * (t > 0)
+        Image.fromarray(rgb, "RGB").save(path)
+        expected = np.where(t > 0, 76 / 255, 0.0)
+    np.testing.assert_allclose(load_mask(path).transmission, expected, atol=1e-12)
+    assert make_aperture("mask", mask=str(path)).mask == load_mask(path)
+
+
+def test_missing_png_is_refused(tmp_path):
+    with pytest.raises(InputError, match="^mask must be an image file"):
+        load_mask(tmp_path / "nothing.png")
+
+
+# --- the sampler ----------------------------------------------------------------------------
+
+
+def test_pdf_integrates_to_one_and_round_trip():
+    table = MaskTable.from_array(ring_mask())
+    h, w = table.shape
+    centres = np.stack(np.meshgrid((np.arange(w) + 0.5 - w / 2) * table.cell, (np.arange(h) + 0.5 - h / 2) * table.cell), -1)
+    assert float(mask_pdf(centres, table).sum() * table.cell**2) == pytest.approx(1.0, abs=1e-12)
+    u = np.random.default_rng(3).random((20_000, 2))
+    p = sample_mask(u, table)
+    assert mask_pdf(p, table).min() > 0.0  # never in an opaque cell
+    np.testing.assert_allclose(invert_mask_sample(p, table), u, atol=2e-6)
+
+
+def test_sampler_chi_square_against_the_mask_weights():
+    # Bins: SUB_CELLS² per mask cell; expected counts from the transmission (uniform inside a cell).
+    table = MaskTable.from_array(ring_mask())
+    h, w = table.shape
+    p = sample_mask(np.random.default_rng(11).random((CHI2_SAMPLES, 2)), table)
+    gx = np.clip(np.floor((p[:, 0] / table.cell + w / 2) * SUB_CELLS), 0, w * SUB_CELLS - 1).astype(int)
+    gy = np.clip(np.floor((h / 2 - p[:, 1] / table.cell) * SUB_CELLS), 0, h * SUB_CELLS - 1).astype(int)  # rows down
+    observed = np.bincount(gy * w * SUB_CELLS + gx, minlength=h * w * SUB_CELLS**2).reshape(h * SUB_CELLS, w * SUB_CELLS)
+    weights = np.kron(table.transmission, np.ones((SUB_CELLS, SUB_CELLS)))
+    expected = CHI2_SAMPLES * weights / weights.sum()
+    assert observed[expected == 0].sum() == 0
+    used = expected > 0
+    result = chisquare(observed[used], expected[used])
+    assert result.pvalue > SIGNIFICANCE, f"chi-square p = {result.pvalue:.2e}; histogram:\n{observed}\nexpected:\n{expected.round(1)}"
+
+
+def test_aperture_sample_turns_and_near_is_half_a_turn():
+    t = ring_mask()
+    aperture = make_aperture("mask", 37.0, mask=t, squeeze=1.3)
+    u = np.random.default_rng(5).random((1000, 2))
+    p, weights = aperture.sample(u)
+    assert np.all(weights == 1.0)
+    np.testing.assert_allclose(aperture.invert(p), u, atol=2e-6)
+    assert aperture.pdf(p).min() > 0.0
+    near, _ = aperture.near().sample(u)
+    np.testing.assert_allclose(near, -p, atol=1e-12)
+
+
+# --- the WGSL twin ---------------------------------------------------------------------------
+
+_HARNESS = """
+// #include "rng.wgsl"
+// #include "shape_ids"
+// #include "apertures.wgsl"
+@group(0) @binding(0) var<storage, read> inputs: array<vec2f>;
+@group(0) @binding(1) var<storage, read_write> outputs: array<vec2f>;
+@compute @workgroup_size(64)
+fn main(@builtin(global_invocation_id) gid: vec3u) {
+    let i = gid.x;
+    if (i >= arrayLength(&inputs)) {
+        return;
+    }
+    let u = inputs[i];
+    outputs[i] = sample_aperture_params(u, PARAMS, CHANNEL_GREEN).xy;
+}
+"""
+
+
+def run_mask_twin(gpu, aperture, u: np.ndarray) -> np.ndarray:
+    """``sample_aperture_params`` of ``aperture`` on each row of ``u``, with its table bound at binding 2."""
+    import wgpu
+
+    from bokehfit.gpu.compute import bind_buffers, dispatch
+    from bokehfit.gpu.shaders import APERTURE_PARAMS, load_shader, mask_table_wgsl
+
+    params = APERTURE_PARAMS.wgsl_value(**aperture.shader_params())
+    code = load_shader("harness", {"harness": _HARNESS.replace("PARAMS", params), "mask_table": mask_table_wgsl(2)})
+    device = gpu.device
+    module = device.create_shader_module(code=code)
+    pipeline = device.create_compute_pipeline(layout=wgpu.AutoLayoutMode.auto, compute={"module": module, "entry_point": "main"})
+    data = np.ascontiguousarray(u, dtype=np.float32)
+    inputs = device.create_buffer_with_data(data=data.tobytes(), usage=wgpu.BufferUsage.STORAGE)
+    outputs = device.create_buffer(size=data.nbytes, usage=wgpu.BufferUsage.STORAGE | wgpu.BufferUsage.COPY_SRC)
+    table = device.create_buffer_with_data(data=aperture.mask.gpu_table().tobytes(), usage=wgpu.BufferUsage.STORAGE)
+    dispatch(device, pipeline, bind_buffers(device, pipeline, inputs, outputs, table), -(-len(data) // 64))
+    return np.frombuffer(device.queue.read_buffer(outputs), dtype=np.float32).reshape(-1, 2)
+
+
+@pytest.mark.gpu
+def test_wgsl_sample_mask_matches_numpy_twin(gpu):
+    aperture = make_aperture("mask", 23.0, mask=ring_mask(), squeeze=0.8)
+    rng = np.random.default_rng(7)
+    u = np.concatenate([rng.random((4000, 2)), [[0.0, 0.0], [0.5, 0.5], [0.999999, 0.999999]]]).astype(np.float32)
+    got = run_mask_twin(gpu, aperture, u)
+    expected, _ = aperture.sample(u.astype(np.float64))
+    np.testing.assert_allclose(got, expected, rtol=0, atol=TWIN_ATOL * aperture.extent())
+
+
+# --- kernels -------------------------------------------------------------------------------
+
+
+def test_exact_kernel_is_the_box_integral_of_the_mask():
+    t = ring_mask()
+    aperture = make_aperture("mask", mask=t)
+    scale, size = 5.3, 15
+    expected = separable_coverage(aperture.mask.transmission, aperture.mask.cell, scale, size)
+    np.testing.assert_allclose(mask_coverage(aperture, scale, size), expected, rtol=0, atol=1e-12)
+    kernel = render_kernel("mask", 0.0, 2 * scale / math.sqrt(math.pi), size, mask=t)
+    np.testing.assert_allclose(kernel, expected / expected.sum(), rtol=0, atol=1e-7)
+
+
+@pytest.mark.parametrize("angle,squeeze", [(30.0, 1.0), (200.0, 1.6)])
+def test_exact_rotated_kernel_against_supersampled_brute_force(angle, squeeze):
+    aperture = make_aperture("mask", angle, mask=ring_mask(), squeeze=squeeze)
+    scale, size, sub = 5.3, 15, 48
+    exact = mask_coverage(aperture, scale, size)
+    coordinates = ((np.arange(size * sub) + 0.5) / sub - 0.5 - (size - 1) / 2) / scale
+    x, y = np.meshgrid(coordinates, -coordinates)
+    brute = aperture.pdf(np.stack([x, y], -1)).reshape(size, sub, size, sub).mean(axis=(1, 3))
+    assert exact.sum() == pytest.approx(scale * scale, rel=1e-12)  # all the light, nothing clipped
+    # Midpoint rule on a piecewise-constant image: only sub-pixels on a cell border err.
+    assert np.abs(exact - brute).sum() / exact.sum() < 2e-3
+
+
+def test_near_kernel_is_the_far_one_turned_by_half_a_turn():
+    far = render_kernel("mask", 15.0, 9.0, 17, mask=ring_mask())
+    near = render_kernel("mask", 15.0, 9.0, 17, mask=ring_mask(), side="near")
+    np.testing.assert_allclose(near, far[::-1, ::-1], atol=1e-7)
+    assert np.abs(near - far).sum() > 0.1
+
+
+@pytest.mark.gpu
+def test_mc_kernel_converges_to_exact(gpu):
+    exact = render_kernel("mask", 30.0, 9.0, 15, mask=ring_mask())
+    errors = [
+        np.abs(render_kernel("mask", 30.0, 9.0, 15, mask=ring_mask(), method="mc", samples=n, seed=1) - exact).sum()
+        for n in (2**12, 2**18)
+    ]
+    assert errors[1] < 0.02 and errors[1] < errors[0] / 4, errors
+
+
+def test_raster_kernel_of_a_mask_is_the_exact_one():
+    kernel = compute_kernel("mask", 30.0, 9.0, 15, mask=ring_mask(), method="raster")
+    np.testing.assert_allclose(kernel.image, render_kernel("mask", 30.0, 9.0, 15, mask=ring_mask()), atol=1e-7)
+    assert kernel.samples is None
+
+
+def test_clipped_mask_kernel_reports_the_lost_light():
+    from bokehfit.kernels import KernelClippedWarning
+
+    with pytest.warns(KernelClippedWarning):
+        kernel = compute_kernel("mask", 0.0, 14.0, 9, mask=ring_mask())
+    assert 0.0 < kernel.clipped_fraction < 1.0
+
+
+def test_mask_is_not_a_fitted_family():
+    assert all(not family.aperture.spec.tabulated for family in FAMILIES)
+
+
+# --- command line ---------------------------------------------------------------------------
+
+
+def save_mask(tmp_path, centre: float = 0.2) -> str:
+    path = tmp_path / "mask.png"
+    Image.fromarray(np.round(ring_mask(centre=centre) * 255).astype(np.uint8), "L").save(path)
+    return str(path)
+
+
+def test_cli_kernel_with_a_mask(tmp_path, capsys):
+    mask = save_mask(tmp_path)
+    out = tmp_path / "k.npy"
+    kernel = main(["kernel", "--shape", "mask", "--mask", mask, "--diameter-px", "9", "--size", "15", "--angle", "30", "--out", str(out)])
+    np.testing.assert_allclose(np.load(out), render_kernel("mask", 30.0, 9.0, 15, mask=mask), atol=1e-7)
+    assert kernel.aperture.mask == load_mask(mask)
+    assert "mask 9×9" in capsys.readouterr().out
+
+
+def test_cli_mask_without_shape_mask_is_refused(tmp_path):
+    with pytest.raises(InputError, match="^mask applies only to shape 'mask'"):  # exit code 2
+        main(["kernel", "--shape", "hexagon", "--mask", save_mask(tmp_path), "--out", str(tmp_path / "k.npy")])
+    assert not (tmp_path / "k.npy").exists()
+
+
+def test_cli_similarity_with_a_mask(tmp_path):
+    # Outline: the 50 % transmission contour, one loop here (a centre above half the peak).
+    mask = save_mask(tmp_path, centre=0.6)
+    result = main(["similarity", "mask", "circle", "--mask-a", mask])
+    assert 0.8 < result["metrics"]["iou"] < 1.0
+    same = main(["similarity", "mask", "mask", "--mask-a", mask, "--mask-b", mask, "--angle-b", "0"])
+    assert same["metrics"]["iou"] == pytest.approx(1.0, abs=1e-3)
+
+
+def test_cli_similarity_refuses_a_mask_contour_in_pieces(tmp_path):
+    with pytest.raises(InputError, match="2 pieces"):  # the dim centre cell is a hole in the 50 % contour
+        main(["similarity", "mask", "circle", "--mask-a", save_mask(tmp_path)])

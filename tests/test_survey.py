@@ -1,0 +1,355 @@
+"""``bokehfit survey`` on a small library made here: rows, statuses, resume after SIGKILL, Dask, the report.
+
+The library: renders with known apertures (a circle at f/2, a hexagon at f/4)
+whose disc sizes follow the thin-lens formula for the f-number written into
+their EXIF, plus a file that is not a photo and a photo with no disc. Small
+images and two shapes to try keep each compare around a second on a CPU adapter.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from html.parser import HTMLParser
+from pathlib import Path
+
+import duckdb
+import numpy as np
+import pyarrow.parquet
+import pytest
+from PIL import Image
+
+import bokehfit
+from bokehfit.survey.files import find_photos
+from bokehfit.synthetic import SyntheticDisc, encode_srgb8, render_discs
+
+WIDTH_PX, HEIGHT_PX = 200, 140
+FOCAL_LENGTH_MM, FOCUS_DISTANCE_MM = 50.0, 2000.0
+#: f/2 gives 40 px discs: c = f² / (N (d_f − f)) on the sensor (design.md §4), scaled by width / sensor width.
+SENSOR_WIDTH_MM = FOCAL_LENGTH_MM**2 / (2.0 * (FOCUS_DISTANCE_MM - FOCAL_LENGTH_MM)) * WIDTH_PX / 40.0
+CAMERA, LENS = "Survey Cam", "Survey 50mm"
+#: (file name, EXIF f-number, aperture shape) of the rendered photos.
+RENDERS = (("a_f2.jpg", 2.0, "circle"), ("b_f2.jpg", 2.0, "circle"), ("c_f4.jpg", 4.0, "hexagon"), ("d_f4.jpg", 4.0, "hexagon"))
+NOT_A_PHOTO, NO_DISCS = "garbage.jpg", "flat.png"
+EXPECTED_STATUS = {**{name: "fitted" for name, _, _ in RENDERS}, NOT_A_PHOTO: "unreadable", NO_DISCS: "no_discs"}
+FSTOP_TOL_REL = 0.03
+COMPARE_OPTIONS = ["--shapes", "circle,hexagon", "--sensor-width-mm", f"{SENSOR_WIDTH_MM:.6f}", "--focus-distance-m",
+                   f"{FOCUS_DISTANCE_MM / 1000:g}"]
+API_OPTIONS = {"shapes": ["circle", "hexagon"], "sensor_width_mm": round(SENSOR_WIDTH_MM, 6),
+               "focus_distance_m": FOCUS_DISTANCE_MM / 1000}
+#: Columns that must agree between two surveys of the same photos (timing, worker and paths aside).
+SAME_COLUMNS = ("sha256", "status", "reason", "camera", "lens", "exif_fnumber", "shape", "blades", "angle_deg",
+                "diameter_px", "fstop", "discs_found", "discs_fitted")
+
+
+def disc_diameter_px(fnumber: float) -> float:
+    coc_mm = FOCAL_LENGTH_MM**2 / (fnumber * (FOCUS_DISTANCE_MM - FOCAL_LENGTH_MM))
+    return coc_mm * WIDTH_PX / SENSOR_WIDTH_MM
+
+
+def write_render(path: Path, fnumber: float, shape: str, seed: int) -> None:
+    diameter = disc_diameter_px(fnumber)
+    centres = [(40.0 + seed % 3, 40.0), (100.0, 40.0), (160.0, 40.0), (40.0, 100.0), (100.0, 100.0), (160.0, 100.0)]
+    discs = [SyntheticDisc(c, diameter, shape, 15.0) for c in centres[: 4 if diameter > 30 else 6]]
+    linear = render_discs(WIDTH_PX, HEIGHT_PX, discs, background=0.03, noise_sigma=0.002, seed=seed)
+    exif = Image.Exif()
+    exif[0x0110] = CAMERA  # Model
+    sub = exif.get_ifd(0x8769)
+    sub[0x829D] = fnumber  # FNumber
+    sub[0xA434] = LENS  # LensModel
+    sub[0x920A] = FOCAL_LENGTH_MM  # FocalLength
+    Image.fromarray(encode_srgb8(linear)).convert("RGB").save(path, exif=exif.tobytes(), quality=92)
+
+
+def make_library(folder: Path) -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    for seed, (name, fnumber, shape) in enumerate(RENDERS):
+        write_render(folder / name, fnumber, shape, seed)
+    (folder / NOT_A_PHOTO).write_bytes(b"this is not a JPEG\n" * 8)
+    Image.fromarray(np.full((80, 80, 3), 40, np.uint8)).save(folder / NO_DISCS)
+    (folder / "notes.txt").write_text("not a photo suffix: a folder walk leaves it out\n")
+    return folder
+
+
+def survey_cli(*args, cwd: Path, **popen):
+    """``python -m bokehfit survey ARGS`` in ``cwd``: the CompletedProcess (or the Popen with ``popen``)."""
+    command = [sys.executable, "-m", "bokehfit", "survey", *map(str, args)]
+    if popen:
+        return subprocess.Popen(command, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **popen)
+    return subprocess.run(command, cwd=cwd, capture_output=True, text=True, timeout=300)
+
+
+def rows(db: Path) -> dict[str, dict]:
+    """The database's rows by file name, read as any DuckDB client would."""
+    with duckdb.connect(str(db), read_only=True) as connection:
+        cursor = connection.execute("SELECT * FROM photos")
+        names = [d[0] for d in cursor.description]
+        return {Path(row[names.index("path")]).name: dict(zip(names, row)) for row in cursor.fetchall()}
+
+
+def same_part(table: dict[str, dict]) -> dict[str, tuple]:
+    return {name: tuple(row[c] for c in SAME_COLUMNS) for name, row in table.items()}
+
+
+@pytest.fixture(scope="module")
+def surveyed(tmp_path_factory, gpu):
+    """The library surveyed once with ``--jobs 2``, with the report and the Parquet export."""
+    folder = tmp_path_factory.mktemp("survey")
+    make_library(folder / "lib")
+    done = survey_cli("lib", "--db", "lens.duckdb", "--jobs", 2, "--report", "lens.html", "--parquet", "lens.parquet",
+                      *COMPARE_OPTIONS, cwd=folder)
+    assert done.returncode == 0, done.stderr
+    return {"folder": folder, "done": done, "rows": rows(folder / "lens.duckdb")}
+
+
+# --------------------------------------------------------------------------------------
+# One row per photo, with the right status
+# --------------------------------------------------------------------------------------
+
+
+def test_one_row_per_photo_with_its_status(surveyed):
+    table = surveyed["rows"]
+    assert {name: row["status"] for name, row in table.items()} == EXPECTED_STATUS
+    assert "6 new (4 fitted, 1 no_discs, 1 unreadable)" in surveyed["done"].stdout
+    assert "not a JPEG, PNG, TIFF or camera raw" in table[NOT_A_PHOTO]["reason"]
+    assert table[NO_DISCS]["reason"].startswith("no bokeh disc found")
+
+
+def test_rows_hold_the_known_apertures_and_exif(surveyed):
+    for name, fnumber, shape in RENDERS:
+        row = surveyed["rows"][name]
+        assert (row["camera"], row["lens"], row["exif_fnumber"]) == (CAMERA, LENS, fnumber)
+        assert row["shape"] == shape, name
+        assert abs(row["fstop"] / fnumber - 1) < FSTOP_TOL_REL, (name, row["fstop"])
+        assert row["roundness"] is None and row["vignetting_radius"] is None  # not fitted yet: stored as null
+
+
+def test_each_row_is_keyed_by_the_content_hash_and_has_its_reports(surveyed):
+    import hashlib
+
+    folder = surveyed["folder"]
+    for name, row in surveyed["rows"].items():
+        assert row["sha256"] == hashlib.sha256((folder / "lib" / name).read_bytes()).hexdigest()
+        if row["status"] == "unreadable":
+            assert row["json_path"] is None
+            continue
+        document = json.loads((folder / row["json_path"]).read_text())
+        assert document["schema_version"] == 2 and document["status"] == row["status"]
+        assert Path(document["input"]["path"]).name == name
+        assert json.loads(row["result"]) == document
+        assert (folder / row["html_path"]).read_text().startswith("<!DOCTYPE html>")
+
+
+def test_rerun_skips_what_is_done(surveyed):
+    folder = surveyed["folder"]
+    done = survey_cli("lib", "--db", "lens.duckdb", *COMPARE_OPTIONS, cwd=folder)
+    assert done.returncode == 0, done.stderr
+    assert "6 photos, 6 already done, 0 new" in done.stdout
+    assert rows(folder / "lens.duckdb") == surveyed["rows"]  # not one row touched
+
+
+# --------------------------------------------------------------------------------------
+# The report and the export
+# --------------------------------------------------------------------------------------
+
+
+class _Page(HTMLParser):
+    def __init__(self):
+        super().__init__()
+        self.links, self.images, self.text, self.group_rows, self._row = [], [], [], [], None
+
+    def handle_starttag(self, tag, attrs):
+        attrs = dict(attrs)
+        if tag == "a":
+            self.links.append(attrs.get("href"))
+        if tag == "img":
+            self.images.append(attrs.get("src", ""))
+        if tag == "tr" and attrs.get("class") == "group":
+            self._row = []
+        if tag == "td" and self._row is not None:
+            self._row.append("")
+
+    def handle_endtag(self, tag):
+        if tag == "tr" and self._row is not None:
+            self.group_rows.append(self._row)
+            self._row = None
+
+    def handle_data(self, data):
+        self.text.append(data)
+        if self._row:
+            self._row[-1] += data
+
+
+def test_report_shows_the_groups(surveyed):
+    folder = surveyed["folder"]
+    page = _Page()
+    page.feed((folder / "lens.html").read_text())
+    text = " ".join(page.text)
+    assert f"{CAMERA} · {LENS}" in text
+    assert "circle at f/2, hexagon at f/4" in text
+    shapes = {cells[0]: cells[3] for cells in page.group_rows}
+    assert shapes["f/2"] == "circle (2/2)" and shapes["f/4"] == "hexagon (2/2)"
+    assert shapes["f/?"] == "—"  # the two files without EXIF: one unreadable, one without discs
+    assert sum(src.startswith("data:image/png;base64,") for src in page.images) == 2  # shape and f-stop plots
+    assert sum(src.startswith("data:image/jpeg;base64,") for src in page.images) == 5  # a thumbnail per read photo
+    assert len(page.links) == 5 and all((folder / link).is_file() for link in page.links)
+
+
+def test_parquet_export_holds_the_table(surveyed):
+    table = pyarrow.parquet.read_table(surveyed["folder"] / "lens.parquet")
+    assert table.num_rows == 6 and "thumbnail" not in table.column_names
+    by_name = {Path(r["path"]).name: r for r in table.to_pylist()}
+    assert {n: r["status"] for n, r in by_name.items()} == EXPECTED_STATUS
+    assert table.schema.metadata[b"bokehfit_version"] == bokehfit.__version__.encode()
+
+
+def test_report_alone_from_the_database(surveyed, tmp_path):
+    folder = surveyed["folder"]
+    done = survey_cli("--db", folder / "lens.duckdb", "--report", tmp_path / "again.html", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert "circle at f/2, hexagon at f/4" in (tmp_path / "again.html").read_text()
+
+
+# --------------------------------------------------------------------------------------
+# Killed mid-run, then resumed
+# --------------------------------------------------------------------------------------
+
+
+def test_sigkill_mid_run_then_rerun_loses_nothing_and_repeats_nothing(tmp_path, gpu):
+    make_library(tmp_path / "lib")
+    survey = survey_cli("lib", "--db", "s.duckdb", "--jobs", 1, *COMPARE_OPTIONS, cwd=tmp_path, start_new_session=True)
+    reports = tmp_path / "s_reports"
+    deadline = time.monotonic() + 240
+    try:  # kill once two photos' reports are written and before the survey ends
+        while len(list(reports.glob("*.json"))) < 2 and survey.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert survey.poll() is None, "the survey ended before it could be killed"
+        os.killpg(survey.pid, signal.SIGKILL)  # the parent and its worker processes, at once
+    finally:
+        survey.communicate(timeout=60)
+    assert survey.returncode == -signal.SIGKILL
+    before = rows(tmp_path / "s.duckdb")  # opens: the database is valid after the kill
+    assert 1 <= len(before) < len(EXPECTED_STATUS)
+    done = survey_cli("lib", "--db", "s.duckdb", "--jobs", 1, *COMPARE_OPTIONS, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert f"{len(before)} already done, {len(EXPECTED_STATUS) - len(before)} new" in done.stdout
+    after = rows(tmp_path / "s.duckdb")
+    assert {name: row["status"] for name, row in after.items()} == EXPECTED_STATUS
+    for name, row in before.items():  # what was stored before the kill was neither lost nor redone
+        assert after[name]["finished_at"] == row["finished_at"] and after[name]["worker"] == row["worker"]
+    with duckdb.connect(str(tmp_path / "s.duckdb"), read_only=True) as connection:
+        assert connection.execute("SELECT count(*), count(DISTINCT sha256) FROM photos").fetchone() == (6, 6)
+
+
+def test_a_killed_worker_process_is_replaced_and_the_survey_completes(tmp_path, gpu):
+    import psutil
+
+    make_library(tmp_path / "lib")
+    survey = survey_cli("lib", "--db", "w.duckdb", "--jobs", 1, *COMPARE_OPTIONS, cwd=tmp_path, start_new_session=True)
+    deadline = time.monotonic() + 240
+    try:
+        while not list((tmp_path / "w_reports").glob("*.json")) and survey.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+        workers = [p for p in psutil.Process(survey.pid).children(recursive=True)
+                   if any("spawn_main" in part for part in p.cmdline())]
+        assert len(workers) == 1 and survey.poll() is None, "no worker process to kill mid-run"
+        workers[0].kill()  # as the kernel's OOM killer or a crash in a driver would
+        out, err = survey.communicate(timeout=240)
+    finally:
+        if survey.poll() is None:
+            os.killpg(survey.pid, signal.SIGKILL)
+            survey.communicate(timeout=60)
+    assert survey.returncode == 0, err
+    assert {name: row["status"] for name, row in rows(tmp_path / "w.duckdb").items()} == EXPECTED_STATUS
+    assert len({row["worker"] for row in rows(tmp_path / "w.duckdb").values() if row["worker"]}) == 2  # a new process
+
+
+# --------------------------------------------------------------------------------------
+# A Dask cluster gives the same rows
+# --------------------------------------------------------------------------------------
+
+
+def test_dask_local_cluster_gives_the_same_rows(surveyed, tmp_path):
+    from distributed import LocalCluster
+
+    shutil.copytree(surveyed["folder"] / "lib", tmp_path / "lib")
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                      dashboard_address=None, worker_dashboard_address=None) as cluster:
+        table = bokehfit.survey([tmp_path / "lib"], tmp_path / "dask.duckdb", scheduler=cluster.scheduler_address,
+                                compare_options=API_OPTIONS)
+    assert table.num_rows == 6
+    assert same_part(rows(tmp_path / "dask.duckdb")) == same_part(surveyed["rows"])
+    workers = {row["worker"] for row in table.to_pylist() if row["worker"]}
+    assert workers and all(not w.endswith(f":{os.getpid()}") for w in workers)  # ran on the cluster's processes
+
+
+# --------------------------------------------------------------------------------------
+# Failures are rows; bad input is one line and exit code 2
+# --------------------------------------------------------------------------------------
+
+
+def test_photo_past_its_time_limit_is_a_timeout_row(surveyed, tmp_path):
+    shutil.copy(surveyed["folder"] / "lib" / RENDERS[0][0], tmp_path / "slow.jpg")
+    table = bokehfit.survey([tmp_path / "slow.jpg"], tmp_path / "t.duckdb", jobs=1, timeout_s=0.01,
+                            compare_options=API_OPTIONS)
+    (row,) = table.to_pylist()
+    assert row["status"] == "timeout" and "0.01 s" in row["reason"]
+
+
+def test_survey_from_a_script_read_on_stdin(surveyed, tmp_path):
+    # Worker processes start by running the parent's main script again; "<stdin>" is no file.
+    shutil.copy(surveyed["folder"] / "lib" / RENDERS[0][0], tmp_path / "one.jpg")
+    script = ("import bokehfit\n"
+              f"table = bokehfit.survey(['one.jpg'], 'stdin.duckdb', jobs=1, compare_options={API_OPTIONS!r})\n"
+              "print(table.select(['status', 'reason']).to_pylist())\n")
+    done = subprocess.run([sys.executable, "-"], input=script, cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "[{'status': 'fitted', 'reason': None}]", done.stdout + done.stderr
+
+
+def test_find_photos_walks_folders_globs_and_files(tmp_path):
+    library = make_library(tmp_path / "lib")
+    (library / "deeper").mkdir()
+    shutil.copy(library / "a_f2.jpg", library / "deeper" / "e.JPG")
+    walked = {p.name for p in find_photos([library])}
+    assert walked == set(EXPECTED_STATUS) | {"e.JPG"}
+    assert {p.name for p in find_photos([str(tmp_path / "lib" / "**" / "*_f4.jpg")])} == {"c_f4.jpg", "d_f4.jpg"}
+    assert [p.name for p in find_photos([library / "notes.txt", library / "notes.txt"])] == ["notes.txt"]
+
+
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (("nowhere", "--db", "x.duckdb"), "PATH 'nowhere' is not a file, a folder or a glob pattern"),
+        (("--db", "x.duckdb"), "give PATHs"),
+        ((".", "--db", "x.sqlite"), "--db must end in .duckdb, .db"),
+        ((".", "--db", "x.duckdb", "--jobs", "0"), "--jobs must be an integer >= 1"),
+        ((".", "--db", "x.duckdb", "--timeout-s", "-1"), "--timeout-s must be greater than 0"),
+        ((".", "--db", "x.duckdb", "--shapes", "circle,hexgon"), "--shapes must name shapes"),
+        ((".", "--db", "x.duckdb", "--report", "x.txt"), "--report: output file must end in .html"),
+    ],
+)
+def test_usage_errors_exit_2_on_one_line(tmp_path, args, needle):
+    done = survey_cli(*args, cwd=tmp_path)
+    assert done.returncode == 2, done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and needle in lines[0], done.stderr
+    assert not (tmp_path / "x.duckdb").exists()
+
+
+def test_another_programs_database_is_refused(tmp_path):
+    with duckdb.connect(str(tmp_path / "theirs.duckdb")) as connection:
+        connection.execute("CREATE TABLE accounts (id INTEGER)")
+    (tmp_path / "p.png").write_bytes(b"")
+    done = survey_cli("p.png", "--db", "theirs.duckdb", cwd=tmp_path)
+    assert done.returncode == 2 and "bokehfit did not make" in done.stderr
+    with duckdb.connect(str(tmp_path / "theirs.duckdb"), read_only=True) as connection:
+        tables = {r[0] for r in connection.execute("SELECT table_name FROM information_schema.tables").fetchall()}
+    assert tables == {"accounts"}
+    assert re.fullmatch(r"bokehfit: error: .*\n", done.stderr)
