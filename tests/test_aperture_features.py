@@ -12,13 +12,11 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass
 
 import numpy as np
 import pytest
 import shapely
 from shapely import affinity
-from scipy import stats
 
 from bokehfit.apertures import (
     CIRCLE_RADIUS,
@@ -43,15 +41,8 @@ from bokehfit.apertures import (
 )
 from bokehfit.errors import InputError
 from bokehfit.gpu.shaders import APERTURE_PARAMS
+from chi2 import GRID, N_CHI2, SIGNIFICANCE, Chi2Result, pearson_chi2
 
-#: Chi-square significance level; seeds are fixed, so outcomes are deterministic.
-SIGNIFICANCE = 1e-3
-#: Cells expecting fewer samples are pooled into one (dropped if the pool is still sparse).
-MIN_EXPECTED = 20
-#: Odd histogram resolution, so symmetric edges do not fall on cell borders.
-GRID = 15
-#: Samples per chi-square test.
-N_CHI2 = 200_000
 #: Midpoint-rule points per cell side for the expected counts of weighted densities.
 CELL_QUADRATURE = 24
 #: Chord error of the polylines standing in for exact outlines in shapely.
@@ -428,14 +419,6 @@ def test_image_to_aperture_flips_rows_only():
 # --- chi-square: the density is the (weighted) area -------------------------------------------
 
 
-@dataclass
-class Chi2Result:
-    statistic: float
-    dof: int
-    p_value: float
-    report: str
-
-
 def expected_fractions(aperture, edges_x, edges_y, weighted: bool) -> np.ndarray:
     """Share of the (weighted) area in each cell, [y bin, x bin]."""
     if not weighted:
@@ -467,22 +450,7 @@ def chi2_against_area(points: np.ndarray, aperture, weighted: bool, label: str) 
     edges_y = np.linspace(ymin - pad_y, ymax + pad_y, GRID + 1)
     observed, _, _ = np.histogram2d(points[:, 1], points[:, 0], bins=[edges_y, edges_x])
     expected = len(points) * expected_fractions(aperture, edges_x, edges_y, weighted)
-    report = (
-        f"{label}: observed counts (rows top = +y):\n{np.array2string(observed[::-1].astype(int), max_line_width=200)}\n"
-        f"expected counts:\n{np.array2string(np.round(expected[::-1], 1), max_line_width=250)}"
-    )
-    obs, exp = observed.ravel(), expected.ravel()
-    stray = (exp <= 0.0) & (obs > 0)
-    if stray.any():
-        return Chi2Result(math.inf, 0, 0.0, f"{int(obs[stray].sum())} samples in cells the shape does not touch\n{report}")
-    low = exp < MIN_EXPECTED
-    o, e = list(obs[~low]), list(exp[~low])
-    if exp[low].sum() >= MIN_EXPECTED:
-        o.append(obs[low].sum())
-        e.append(exp[low].sum())
-    o, e = np.array(o), np.array(e)
-    statistic = float(np.sum((o - e) ** 2 / e))
-    return Chi2Result(statistic, len(o) - 1, float(stats.chi2.sf(statistic, len(o) - 1)), report)
+    return pearson_chi2(observed, expected, label)
 
 
 CHI2_CASES = [

@@ -15,7 +15,6 @@ from typing import Callable
 import numpy as np
 import pytest
 import shapely
-from scipy import stats
 
 from bokehfit.apertures import (
     CIRCLE_RADIUS,
@@ -35,18 +34,8 @@ from bokehfit.apertures import (
     uniform_triangle_pdf,
 )
 from bokehfit.kernels.exact import coverage
+from chi2 import GRID, N_CHI2, SIGNIFICANCE, Chi2Result, pearson_chi2
 
-#: Chi-square significance level: a sampler fails when p < SIGNIFICANCE.
-#: Seeds are fixed, so the outcome is deterministic, not flaky.
-SIGNIFICANCE = 1e-3
-#: Cells expecting fewer samples than this are pooled into one cell (and
-#: dropped if the pool still expects fewer), as the chi-square law needs.
-MIN_EXPECTED = 20
-#: Histogram resolution: odd, so that edges through the centre (and the
-#: symmetric edges of the shapes) do not fall on cell borders.
-GRID = 15
-#: Independent samples per chi-square test.
-N_CHI2 = 200_000
 #: The bounding box is widened by this fraction of its size on each side, so
 #: the outline's extreme edges lie inside cells, not on the grid's border.
 BOX_PADDING = 0.02
@@ -239,36 +228,12 @@ def expected_fractions(case: Case, x_edges: np.ndarray, y_edges: np.ndarray) -> 
     return shapely.area(shapely.intersection(case.polygon, boxes)) / case.polygon.area
 
 
-@dataclass
-class Chi2Result:
-    statistic: float
-    dof: int
-    p_value: float
-    report: str
-
-
 def chi2_uniformity(points: np.ndarray, case: Case) -> Chi2Result:
     """Pearson's chi-square of the samples' histogram against the exact areas."""
     x_edges, y_edges = _cell_edges(case)
     observed, _, _ = np.histogram2d(points[:, 1], points[:, 0], bins=[y_edges, x_edges])
     expected = len(points) * expected_fractions(case, x_edges, y_edges)
-    report = (
-        f"{case.id}: observed counts (rows top = +y):\n{np.array2string(observed[::-1].astype(int), max_line_width=200)}\n"
-        f"expected counts:\n{np.array2string(np.round(expected[::-1], 1), max_line_width=250)}"
-    )
-    obs, exp = observed.ravel(), expected.ravel()
-    stray = (exp <= 0.0) & (obs > 0)
-    if stray.any():
-        return Chi2Result(math.inf, 0, 0.0, f"{int(obs[stray].sum())} samples in cells the shape does not touch\n{report}")
-    low = exp < MIN_EXPECTED
-    o, e = list(obs[~low]), list(exp[~low])
-    if exp[low].sum() >= MIN_EXPECTED:  # pool the sparse cells into one
-        o.append(obs[low].sum())
-        e.append(exp[low].sum())
-    o, e = np.array(o), np.array(e)
-    statistic = float(np.sum((o - e) ** 2 / e))
-    dof = len(o) - 1
-    return Chi2Result(statistic, dof, float(stats.chi2.sf(statistic, dof)), report)
+    return pearson_chi2(observed, expected, case.id)
 
 
 def test_expected_fractions_sum_to_one():
