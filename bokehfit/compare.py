@@ -181,7 +181,7 @@ class Comparison:
         if margin is None:
             evidence = "only one model was tried"
         else:
-            evidence = f"{evidence_words(margin)} evidence over the {fit.candidates[1].family.name} (ΔBIC {margin:.0f})"
+            evidence = f"{evidence_words(margin)} evidence over a {fit.candidates[1].family.aperture.display_name} (ΔBIC {margin:.0f})"
         agree = f"{len(fit.disc_fits)} disc{'s' if len(fit.disc_fits) != 1 else ''} {'agree' if len(fit.disc_fits) != 1 else 'fitted'}"
         if status == "fitted":
             return f"Sure: {what}; {agree}, {evidence}."
