@@ -14,6 +14,7 @@ bokehfit's own outputs. Every file bokehfit writes carries a mark, and
 ``.jpg``   a comment (``COM``) segment ``bokehfit VERSION`` before the image data
 ``.npy``   ``# bokehfit VERSION`` in the header's padding, a comment to ``numpy.load``
 ``.exr``   a string attribute ``software`` = ``bokehfit VERSION`` in the header
+``.parquet``  a ``bokehfit_version`` key in the footer's key-value metadata (the survey's export)
 ========  =====================================================================
 
 Any other existing file (a photo, notes, another program's output, a file of
@@ -218,6 +219,32 @@ _STAMPS: dict[str, Callable[[bytes], bytes]] = {
 }
 
 
+#: Parquet files end in their footer: its length (int32, little-endian) and the magic ``PAR1``.
+_PARQUET_MAGIC = b"PAR1"
+#: Largest Parquet footer read when looking for the mark (a survey's is a few kB).
+_PARQUET_FOOTER_MAX_BYTES = 1 << 20
+
+
+def _parquet_is_ours(path: str | os.PathLike) -> bool:
+    """The footer's key-value metadata (uncompressed Thrift) holds the key ``bokehfit_version``."""
+    with open(path, "rb") as file:
+        if not file.read(4) == _PARQUET_MAGIC:
+            return False
+        size = file.seek(0, os.SEEK_END)
+        if size < 12:
+            return False
+        file.seek(size - 8)
+        footer_length, magic = struct.unpack("<i4s", file.read(8))
+        if magic != _PARQUET_MAGIC or not 0 < footer_length <= min(_PARQUET_FOOTER_MAX_BYTES, size - 12):
+            return False
+        file.seek(size - 8 - footer_length)
+        return b"bokehfit_version" in file.read(footer_length)
+
+
+#: Formats whose mark is in a footer: the recogniser reads the file itself, within a stated bound.
+_FOOTER_RECOGNISERS: dict[str, Callable[[str | os.PathLike], bool]] = {".parquet": _parquet_is_ours}
+
+
 def is_bokehfit_output(path: str | os.PathLike) -> bool:
     """Whether ``path`` is a file that bokehfit wrote (it carries bokehfit's mark; see the module notes).
 
@@ -231,10 +258,13 @@ def is_bokehfit_output(path: str | os.PathLike) -> bool:
     >>> is_bokehfit_output("holiday.jpg")  # doctest: +SKIP
     False
     """
-    recognise = _RECOGNISERS.get(Path(path).suffix.lower())
-    if recognise is None:
-        return False
+    suffix = Path(path).suffix.lower()
+    recognise = _RECOGNISERS.get(suffix)
     try:
+        if suffix in _FOOTER_RECOGNISERS:  # the mark is at the file's end, not in its head
+            return _FOOTER_RECOGNISERS[suffix](path)
+        if recognise is None:
+            return False
         with open(path, "rb") as file:
             return recognise(file.read(_HEAD_BYTES))
     except OSError:

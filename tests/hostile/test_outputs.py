@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import signal
+import struct
 import subprocess
 import sys
 import time
@@ -213,3 +214,24 @@ def test_write_pause_hook_rejects_bad_values(tmp_path, monkeypatch):
     with pytest.raises(InputError, match=WRITE_PAUSE_ENV):
         write_json(tmp_path / "r.json", {"bokehfit_version": "test"})
     assert list(tmp_path.iterdir()) == []
+
+
+def test_parquet_mark_is_read_from_the_footer(tmp_path):
+    """A survey's Parquet export is bokehfit's (its footer metadata says so); another program's is not."""
+    import pyarrow
+    import pyarrow.parquet
+
+    table = pyarrow.table({"value": [1, 2, 3]})
+    ours, theirs = tmp_path / "ours.parquet", tmp_path / "theirs.parquet"
+    pyarrow.parquet.write_table(table.replace_schema_metadata({b"bokehfit_version": b"0"}), ours)
+    pyarrow.parquet.write_table(table, theirs)
+    assert is_bokehfit_output(ours) and not is_bokehfit_output(theirs)
+    assert check_output_path(ours, (".parquet",)) == ours
+    before = theirs.read_bytes()
+    with pytest.raises(InputError, match="not written by bokehfit"):
+        check_output_path(theirs, (".parquet",))
+    assert theirs.read_bytes() == before
+    # A file that only claims to be Parquet, with an absurd footer length, is not ours and is read no further.
+    fake = tmp_path / "fake.parquet"
+    fake.write_bytes(b"PAR1" + b"bokehfit_version" + struct.pack("<i", 2**31 - 1) + b"PAR1")
+    assert not is_bokehfit_output(fake)
