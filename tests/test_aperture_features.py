@@ -285,7 +285,7 @@ def test_near_disc_is_the_far_disc_turned_with_rim_and_colour_negated():
     assert turned.symmetric_difference(_polygon(near, q)).area < 1e-8
     assert near.area(q) == pytest.approx(far.area(q), rel=1e-12) and far.area(q) < 0.95
     u = np.random.default_rng(5).random((1000, 2))
-    (p_far, w_far), (p_near, w_near) = far.sample(u, q, "red"), near.sample(u, q, "red")
+    (p_far, _), (p_near, _) = far.sample(u, q, "red"), near.sample(u, q, "red")
     assert np.all(np.hypot(*p_near.T) <= far.extent() * (1 - 0.02) * (1 + 1e-12))  # red shrinks near
     assert np.all(np.hypot(*p_far.T) <= far.extent() * 1.02 * (1 + 1e-12))
     assert near.near() == dataclasses.replace(far, angle_deg=far.angle_deg + 360.0, rim=far.rim)

@@ -25,7 +25,6 @@ from photo_factory import (
     make_icc_profile,
     make_xmp,
     srgb_decode,
-    write_jpeg,
     write_png,
     write_tiff,
 )
@@ -35,7 +34,7 @@ from bokehfit.discs import MAX_CANDIDATES, find_discs
 from bokehfit.errors import InputError
 from bokehfit.io import load_photo
 from bokehfit.io.exif import XMP_MAX_BYTES, build_exif, parse_xmp, read_exif_tags, xmp_property
-from bokehfit.io.photo import FLOAT_SAMPLE_MAX, METADATA_MAX_BYTES
+from bokehfit.io.photo import FLOAT_SAMPLE_MAX
 
 SRGB_WEIGHTS = np.array([0.2126, 0.7152, 0.0722])
 #: Seconds a crafted metadata block may take to read (the fixed parsers take milliseconds).

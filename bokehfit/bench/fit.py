@@ -39,7 +39,6 @@ __all__ = [
     "fit_set",
     "fit_steps",
     "grid_layout",
-    "max_fit_discs",
     "score",
     "write_jpeg",
 ]
