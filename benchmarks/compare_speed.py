@@ -46,7 +46,8 @@ def main() -> None:
     print(f"\n## compare on a {compared['megapixels']:.1f}-MP JPEG, seconds\n")
     print(markdown_table(*compare_table(result)))
     print(f"\nfound {compared['discs_found']} discs, fitted {compared['discs_fitted']}: {compared['aperture']}; "
-          f"kernel on {compared['device'].get('adapter')}; cold process: import {compared['cold_import_s']:.2f} s, "
+          f"kernel {compared['kernel_method']} on {compared['device'].get('adapter') or 'the CPU'}; "
+          f"cold process: import {compared['cold_import_s']:.2f} s, "
           f"start to exit {compared['cold_process_s']:.2f} s")
     if out:
         write_json(Path(out), {"bokehfit_version": bokehfit.__version__, "quick": args.quick, **result})

@@ -19,13 +19,14 @@ from skimage import measure
 
 from bokehfit import __version__
 from bokehfit.apertures import Aperture
-from bokehfit.discs import DEFAULT_MIN_DIAMETER_PX, Disc, DiscSearch, find_discs
+from bokehfit.discs import DEFAULT_MIN_DIAMETER_PX, USABLE_EVIDENCE, Disc, DiscSearch, find_discs
 from bokehfit.discs.measure import RESOLVABLE_PX
 from bokehfit.errors import InputError
 from bokehfit.fit import LENS_FEATURES, ApertureFit, FailedFit, FitOptions, fit_aperture
 from bokehfit.gpu import AdapterChoice
 from bokehfit.io import Photo, load_photo
-from bokehfit.kernels import Kernel, compute_kernel
+from bokehfit.kernels import AUTO, Kernel, compute_kernel
+from bokehfit.kernels.exact import coverage
 from bokehfit.metrics import METRICS, angle_error, compare_outlines
 from bokehfit.metrics.outlines import resample
 from bokehfit.optics import (
@@ -47,6 +48,7 @@ __all__ = [
     "estimate_fstop",
     "evidence_words",
     "judge",
+    "kernel_words",
     "resolve_geometry",
 ]
 
@@ -54,8 +56,10 @@ SCHEMA_VERSION = 2
 #: Evidence in words for a BIC margin (Kass & Raftery 1995, "Bayes factors",
 #: J. Am. Stat. Assoc. 90:773, section 3.2, on the scale 2·ln B ≈ ΔBIC).
 EVIDENCE_WORDS = ((2.0, "barely any"), (6.0, "positive"), (10.0, "strong"), (math.inf, "very strong"))
-#: L1 tolerance of the matched kernel rendered on the GPU: its 50 % outline is
-#: what the metrics use, and the sample count follows from the convergence model.
+#: L1 tolerance of the matched kernel: its 50 % outline is what the metrics use. It is
+#: drawn by the cheapest method that meets it, the start-up of a GPU included
+#: (``method="auto"``: ``exact`` for any usual disc, which starts no GPU), and a
+#: sampling method's sample count follows from its convergence model.
 KERNEL_TOLERANCE = 0.01
 #: Points each outline is resampled to (evenly along its length) before the metrics.
 METRIC_POINTS = 256
@@ -181,7 +185,7 @@ class Comparison:
         if margin is None:
             evidence = "only one model was tried"
         else:
-            evidence = f"{evidence_words(margin)} evidence over a {fit.candidates[1].family.aperture.display_name} (ΔBIC {margin:.0f})"
+            evidence = f"{evidence_words(margin)} evidence over a {fit.runner_up.family.aperture.display_name} (ΔBIC {margin:.0f})"
         agree = f"{len(fit.disc_fits)} disc{'s' if len(fit.disc_fits) != 1 else ''} {'agree' if len(fit.disc_fits) != 1 else 'fitted'}"
         if status == "fitted":
             return f"Sure: {what}; {agree}, {evidence}."
@@ -199,7 +203,8 @@ class Comparison:
             "angle_deg": None if drawn.symmetry_deg is None else round(drawn.canonical_angle_deg, 3),
             "diameter_px": round(kernel.diameter_px, 3),
             "size_px": int(kernel.image.shape[0]),
-            "samples": int(kernel.samples),
+            "method": kernel.method,
+            "samples": None if kernel.samples is None else int(kernel.samples),
             "time_s": round(kernel.time_s, 4),
         }
 
@@ -235,10 +240,15 @@ class Comparison:
         entry = disc.to_json()
         entry["usable"] = bool(disc.usable)
         entry["used"] = fitted is not None
+        entry["used_as"] = None if fitted is None else _used_as(disc, fitted)
         entry["rejected_because"] = disc_problems(disc)
+        if disc.index in self.fit.rejected:
+            entry["rejected_because"].append(self.fit.rejected[disc.index])
         entry["fit_diameter_px"] = None if fitted is None else round(fitted.diameter_px, 3)
-        if fitted is not None and fitted.angle_deg is not None:
-            entry["angle_deg"] = round(fitted.angle_deg, 3)
+        item = self.fit.disc_item(disc)
+        own = None if item is None else item.own
+        if own is not None and own.angle_deg is not None:
+            entry["angle_deg"] = round(own.angle_deg, 3)
         entry.update({k: _round(v) for k, v in self.disc_metrics.get(disc.index, {}).items()})
         depth = self.fstop.light_distances_m.get(disc.index) if fitted is not None else None
         entry["depth_m"] = None if depth is None else round(depth, 4)
@@ -286,12 +296,12 @@ class Comparison:
         lines.extend(self.fstop_lines(data))
         if aperture["angle_note"]:
             lines.append(aperture["angle_note"])
-        ranked = ", ".join(f"{c['name']} (ΔBIC {c['delta_bic']:.0f})" for c in aperture["candidates"][1:])
+        ranked = ", ".join(f"{c['display_name']} (ΔBIC {c['delta_bic']:.0f})" for c in aperture["candidates"][1:])
         lines.append(f"runners-up: {ranked or 'none'}")
         lines.append("metrics (discs vs kernel, median): " + ", ".join(
             f"{k} {v:.4f}" for k, v in data["metrics"].items() if v is not None))
         lines.append("time: " + ", ".join(f"{k} {v:.2f} s" for k, v in data["timing_s"].items())
-                     + f"; kernel on {data['device'].get('adapter')}")
+                     + f"; kernel: {kernel_words(data)}")
         return "\n".join(lines)
 
 
@@ -353,9 +363,18 @@ def _describe(aperture: dict) -> str:
     name = Aperture.from_json(aperture).display_name
     if aperture["aspect"] is not None:
         name += f" (aspect {aperture['aspect']:.2f})"
-    if aperture["angle_deg"] is None:
-        return name
-    return f"{name} at {aperture['angle_deg']:.2f}° ± {_fmt(aperture['angle_uncertainty_deg'], 2)}°"
+    if aperture["angle_deg"] is not None:
+        name += f" at {aperture['angle_deg']:.2f}° ± {_fmt(aperture['angle_uncertainty_deg'], 2)}°"
+    features = []
+    if aperture.get("roundness"):
+        features.append(f"roundness {aperture['roundness']:.2f} ± {_fmt(aperture.get('roundness_uncertainty'), 2)}")
+    if aperture.get("rim"):
+        side = "bright rim" if aperture["rim"] > 0 else "bright centre"
+        features.append(f"rim {aperture['rim']:+.2f} ± {_fmt(aperture.get('rim_uncertainty'), 2)} ({side})")
+    if aperture.get("vignetting"):
+        cut = aperture["vignetting"]
+        features.append(f"cat-eye vignetting (barrel radius {cut['radius']:.2f}, shift {cut['shift']:+.2f})")
+    return name + "".join(f", {feature}" for feature in features)
 
 
 def evidence_words(delta_bic: float) -> str:
@@ -365,11 +384,21 @@ def evidence_words(delta_bic: float) -> str:
 
 def disc_problems(disc: Disc) -> list[str]:
     """Why a disc is not usable, in words shared by ``discs`` and ``compare`` (empty when usable)."""
-    problems = [word for word, flag in (("saturated", disc.saturated), ("cut by the frame", disc.clipped),
-                                        ("overlapping", disc.overlaps)) if flag]
+    problems = [word for word, flag in (("cut by the frame", disc.clipped), ("overlapping", disc.overlaps)) if flag]
     if not disc.resolvable:
         problems.append(f"under {RESOLVABLE_PX:g} px")
+    if disc.evidence not in USABLE_EVIDENCE:
+        problems.append(f"only {disc.outline_seen:.0%} of its outline is its own")
     return problems
+
+
+def _used_as(disc: Disc, fitted) -> str:
+    """What a used disc gave the fit, in words."""
+    if disc.evidence == "plateau" and not fitted.censored:
+        return "plateau and outline"
+    if fitted.censored:
+        return f"outline (saturated: {fitted.censored} clipped pixels fitted as lower bounds)"
+    return "outline and profile (a ring: bright rim)" if disc.ring else "outline"
 
 
 def _round(value):
@@ -385,6 +414,16 @@ def _angle_note(fit: ApertureFit) -> str | None:
         f"odd symmetry: lights behind the focus plane give {aperture.canonical_angle_deg:.2f}°, "
         f"lights in front of it {other:.2f}° (pass --focus-side to choose)"
     )
+
+
+def kernel_words(data: dict) -> str:
+    """How the matched kernel of a ``compare`` JSON document was drawn, in words (method, samples, device)."""
+    kernel, device = data["kernel"], data["device"]
+    if kernel is None:
+        return "none drawn"
+    words = kernel["method"] if kernel["samples"] is None else f"{kernel['method']}, {kernel['samples']} samples"
+    adapter = device.get("adapter")
+    return f"{words} on {adapter}" if adapter else f"{words} on the CPU"
 
 
 def resolve_geometry(
@@ -508,25 +547,47 @@ def estimate_fstop(
 
 def _kernel_outline(kernel: Kernel) -> np.ndarray:
     """The kernel's 50 % outline as (x, y) = (column, row) points."""
-    image = kernel.image
-    area_px = math.pi * kernel.diameter_px**2 / 4.0
-    contours = measure.find_contours(np.pad(image, 1), 0.5 / area_px)
+    return _half_outline(kernel.image, kernel.diameter_px)
+
+
+def _half_outline(image: np.ndarray, diameter_px: float) -> np.ndarray:
+    """The 50 % outline of a unit-sum disc image of equal-area ``diameter_px``, as (x, y) points."""
+    area_px = math.pi * diameter_px**2 / 4.0
+    contours = measure.find_contours(np.pad(image / max(float(image.sum()), 1e-300), 1), 0.5 / area_px)
     longest = max(contours, key=len)
     return resample(longest[:, ::-1] - 1.0, METRIC_POINTS)
 
 
+def _shown_outline(fitted, diameter_px: float) -> np.ndarray:
+    """The 50 % outline of the aperture as one disc shows it: at its place in the frame (the
+    vignetting's cut) and turned where the disc is (a near disc of an odd shape), exact coverage."""
+    scale = diameter_px * math.sqrt(math.pi) / 2.0
+    size = 2 * math.ceil(fitted.aperture.extent() * scale) + 9
+    where = fitted.field_position if fitted.aperture.vignetting is not None else None
+    return _half_outline(coverage(fitted.aperture, scale, size, field_position=where), diameter_px)
+
+
 def disc_metrics(comparison_fit: ApertureFit, kernel_outline: np.ndarray) -> dict[int, dict[str, float]]:
-    """Every metric between each fitted disc's outline and the matched kernel's outline."""
+    """Every metric between each fitted disc's outline and the matched kernel's outline.
+
+    Where the kernel is not what a disc shows (the vignetting cuts it at its place
+    in the frame; a near disc of an odd shape shows it turned), the disc is
+    compared with its own exact outline of the fitted aperture instead.
+    """
     out = {}
     symmetry = comparison_fit.aperture.symmetry_deg
     seen = comparison_fit.seen_angle_deg
     for item in comparison_fit.disc_fits:
-        values = compare_outlines(
-            resample(item.disc.outline_xy, METRIC_POINTS), kernel_outline, rotation_within_deg=ALIGNMENT_SEARCH_DEG
-        )
         fitted = item.fits[comparison_fit.family.name]
-        if symmetry is not None and fitted.angle_deg is not None and seen is not None:
-            values["angle_error_deg"] = angle_error(fitted.angle_deg, seen, symmetry)
+        own = fitted.aperture != comparison_fit.seen_aperture or fitted.aperture.vignetting is not None
+        reference = _shown_outline(fitted, comparison_fit.diameter_px) if own else kernel_outline
+        values = compare_outlines(
+            resample(item.disc.outline_xy, METRIC_POINTS), reference, rotation_within_deg=ALIGNMENT_SEARCH_DEG
+        )
+        own = item.own if item.own is not None else fitted
+        if symmetry is not None and own.angle_deg is not None and seen is not None:
+            shown = seen + (180.0 if item.turned else 0.0)
+            values["angle_error_deg"] = angle_error(own.angle_deg, shown, symmetry)
         out[item.disc.index] = values
     return out
 
@@ -577,7 +638,7 @@ def compare_photo(
     timing["detect"] = search.time_s
     notify("fit")
     fit = fit_aperture(photo.luminance, search.discs, shapes=shapes, focus_side=focus_side, options=fit_options,
-                       progress=progress)
+                       progress=progress, clipped=photo.clipped)
     timing["fit"] = fit.time_s
     kernel = None
     fstop = FStop(None, None, "no aperture was fitted", size_convention, lens_model, exif_fnumber=photo.exif.fnumber)
@@ -593,10 +654,10 @@ def compare_photo(
         scale = fit.diameter_px * math.sqrt(math.pi) / 2.0
         size = 2 * math.ceil(aperture.extent() * scale) + 9
         kernel = compute_kernel(
-            aperture.replace(angle_deg=seen_angle),
+            fit.seen_aperture,
             diameter_px=fit.diameter_px,
             size=size,
-            method="mc",
+            method=AUTO,
             tolerance=KERNEL_TOLERANCE,
             adapter=adapter,
         )
@@ -620,7 +681,8 @@ def judge(fit: ApertureFit, metrics: dict[str, float | None]) -> tuple[list[str]
     """Doubts about a fit, and the reason to reject it, from the evidence (stated thresholds)."""
     doubts = []
     if not fit.sure:
-        doubts.append(f"the runner-up ({fit.candidates[1].family.name}) fits almost as well")
+        doubts.append(f"the runner-up ({fit.runner_up.family.aperture.display_name}) fits almost as well")
+    doubts.extend(fit.notes)
     fitted = len(fit.disc_fits)
     if fitted < MIN_SURE_DISCS:
         doubts.append(f"only {fitted} disc{' was' if fitted == 1 else 's were'} clean enough to fit")

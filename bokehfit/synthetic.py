@@ -86,7 +86,7 @@ def render_discs(
 
 def encode_srgb8(linear: np.ndarray) -> np.ndarray:
     """uint8 sRGB encoding of linear values in [0, 1] (for writing test JPEGs and PNGs)."""
-    from bokehfit.io.colour import colour_science
+    from bokehfit.io.colour import srgb_encode
 
-    encoded = colour_science().cctf_encoding(np.clip(linear, 0.0, 1.0).astype(np.float64), function="sRGB")
+    encoded = srgb_encode(np.clip(linear, 0.0, 1.0))
     return np.round(encoded * 255.0).astype(np.uint8)

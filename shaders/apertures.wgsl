@@ -8,7 +8,8 @@
 // Needs: the SHAPE_* and CHANNEL_* constants and the ApertureParams struct
 // (generated include "shape_ids"), and mask_table_value(i) (generated include
 // "mask_table": the CDF tables of a mask in a storage buffer where a shader binds
-// them, kernel_mc.wgsl; elsewhere a stub, and the mask shape is not drawn there).
+// them, kernel_mc.wgsl, pathtrace.wgsl and points.wgsl; in the test harnesses of
+// single samplers a stub, and the mask shape is not drawn there).
 
 // #include "mask_table"
 

@@ -13,6 +13,7 @@ import json
 import re
 from collections import defaultdict
 
+import numpy as np
 import pytest
 from PIL import Image
 
@@ -118,6 +119,40 @@ def test_compare_stages_add_up(result):
     stages = sum(c[f"{s}_s"] for s in ("load", "detect", "fit", "render", "metrics"))
     assert 0 < stages <= c["total_s"] * 1.001
     assert c["cold_total_s"] > 0 and c["discs_fitted"] > 0
+
+
+def test_compare_beside_the_bare_decode_and_the_targets(result, bench):
+    from bokehfit.bench.compare import TARGETS
+
+    c = result["compare"]
+    assert result["parts"] == "abc"
+    assert 0 < c["decode_s"] < c["total_s"]
+    assert c["warm_over_decode"] == pytest.approx(c["total_s"] / c["decode_s"])
+    assert c["load_detect_over_decode"] == pytest.approx((c["load_s"] + c["detect_s"]) / c["decode_s"])
+    # Peak memory: the cold process's peak RSS over its RSS before the call, per pixel of the photo.
+    assert 0 < c["rss_before_bytes"] < c["rss_peak_bytes"]
+    assert c["peak_bytes_per_px"] == pytest.approx(
+        (c["rss_peak_bytes"] - c["rss_before_bytes"]) / (c["width"] * c["height"]))
+    assert c["targets"] == TARGETS
+    assert c["cold_process_s"] >= c["cold_total_s"] + c["cold_import_s"]
+    # The photo is a colour JPEG, as a camera writes one.
+    with Image.open(c["photo"]) as photo:
+        assert photo.format == "JPEG" and photo.mode == "RGB"
+        rgb = np.asarray(photo.convert("RGB"), dtype=np.float64)
+    assert np.abs(rgb[..., 0] - rgb[..., 2]).mean() > 1.0  # not grey
+    # The kernel of these discs is drawn exactly (no GPU started), and the report says which.
+    assert c["kernel_method"] == c["cold_kernel_method"] == "exact"
+    page = (bench / "out.html").read_text(encoding="utf-8")
+    assert "warm compare / bare decode" in page and "B/px" in page
+
+
+def test_parts_are_checked_before_anything_runs():
+    from bokehfit.bench import run_bench
+    from bokehfit.errors import InputError
+
+    for parts in ("", "d", "ac x"):
+        with pytest.raises(InputError, match=r"^parts must be one or more of the letters a, b, c"):
+            run_bench(True, parts=parts)
 
 
 def test_html_embeds_decodable_png_plots(bench):

@@ -13,6 +13,7 @@ from bokehfit.apertures import Chromatic, Vignetting, make_aperture
 from bokehfit.errors import InputError
 from bokehfit.kernels import compute_kernel, render_kernel
 from bokehfit.kernels.exact import coverage, rim_coverage
+from test_mask import ring_mask
 
 #: Chords per arc of the independent shapely outlines: each polygon lies inside
 #: its arcs, so a pixel's coverage can be short by at most the total area the
@@ -202,6 +203,8 @@ FEATURE_APERTURES = {
     "vignetted": dict(shape="pentagon", vignetting=Vignetting(1.15, 0.9)),
     "rim": dict(shape="hexagon", rim=0.6, angle_deg=5.0),
     "chromatic": dict(shape="hexagon", chromatic=Chromatic(0.06, -0.05)),
+    "mask": dict(shape="mask", mask=ring_mask(), angle_deg=30.0, squeeze=1.3),
+    "mask_chromatic": dict(shape="mask", mask=ring_mask(), chromatic=Chromatic(0.06, -0.05)),
 }
 
 

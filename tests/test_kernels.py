@@ -47,6 +47,44 @@ def test_exact_sums_to_one_and_matches_brute_force(shape, params):
     assert np.abs(kernel - reference).max() <= 2.0 / SUPERSAMPLE * pixel_area
 
 
+#: Edge-only exact coverage against the integral on the whole grid: a pixel the outline
+#: crosses is the same computation (bit-identical); any other is 0 or 1 where the whole
+#: grid's second difference of F rounds: F's terms reach (frame side + disc's extent)² px²,
+#: so a few eps of that.
+EDGE_ONLY_ROUNDING = 4.0 * np.finfo(np.float64).eps
+
+
+@pytest.mark.parametrize(
+    "shape,params,diameter,size,extra",
+    [
+        ("pentagon", {}, 160.0, 190, {}),
+        ("circle", {}, 120.0, 131, {"offset_xy": (0.37, -0.21)}),
+        ("star", {}, 140.0, 200, {"flip": True}),
+        ("hexagon", {"roundness": 0.4, "squeeze": 1.6}, 100.0, 181, {}),
+        ("hexagon", {"vignetting": {"radius": 1.0, "shift": 0.9}}, 120.0, 140, {"field_position": (0.9, -0.6)}),
+        ("square", {}, 140.0, 120, {}),  # the disc overflows the frame: the inside touches its border
+        ("slit", {"aspect": 0.05}, 200.0, 240, {}),  # a thin sliver: few pixels wholly inside
+    ],
+)
+def test_exact_edge_only_matches_the_whole_grid(monkeypatch, shape, params, diameter, size, extra):
+    from bokehfit.kernels import exact
+
+    aperture = make_aperture(shape, 23.0, **params)
+    scale = diameter * math.sqrt(math.pi) / 2
+    monkeypatch.setattr(exact, "_EDGE_ONLY_MIN_WORK", 0)  # always edge-only (unless it crosses most pixels)
+    edge_only = exact.coverage(aperture, scale, size, **extra)
+    monkeypatch.setattr(exact, "_EDGE_ONLY_MIN_WORK", math.inf)  # always the whole grid
+    whole = exact.coverage(aperture, scale, size, **extra)
+    crossed = (whole > 1e-9) & (whole < 1.0 - 1e-9)
+    assert 0 < crossed.sum() < 0.5 * size * size  # the edge-only path ran
+    np.testing.assert_array_equal(edge_only[crossed], whole[crossed])
+    bound = EDGE_ONLY_ROUNDING * (size + 2.0 * aperture.extent() * scale) ** 2
+    assert np.abs(edge_only - whole).max() <= bound
+    rest = edge_only[~crossed]
+    assert np.all(np.minimum(rest, 1.0 - rest) <= bound)  # wholly outside or inside, to rounding
+    assert np.count_nonzero(rest == 1.0) > np.count_nonzero(whole == 1.0)  # the inside set, not integrated
+
+
 @pytest.mark.parametrize("shape,params", SHAPE_PARAMS)
 def test_near_is_far_rotated_180(shape, params):
     far = render_kernel(shape, 33.0, 19.0, 31, **params)
@@ -262,3 +300,41 @@ def test_tolerance_beyond_a_sampling_method_names_its_smallest():
     smallest = predicted_l1("mc", "stratified", 64.0, 46340**2)
     with pytest.raises(InputError, match=rf"^tolerance must be at least {smallest:.3g} for method 'mc' on a 64-px disc"):
         render_kernel("hexagon", 0.0, 64.0, 128, method="mc", tolerance=1e-6)
+
+
+@pytest.mark.parametrize("diameter", [12.0, 60.0, 150.0, 500.0])
+def test_auto_draws_a_usual_kernel_exactly_without_a_gpu(diameter):
+    # A kernel drawn on its own: exact costs milliseconds, a GPU's start-up most of a second.
+    size = int(diameter * 1.3) + 9
+    kernel = compute_kernel("pentagon", 20.0, diameter, size, method="auto", tolerance=0.01)
+    assert kernel.method == "exact" and kernel.samples is None and kernel.device is None
+    assert kernel.setup_s < 1e-3  # nothing to start
+    np.testing.assert_array_equal(kernel.image, render_kernel("pentagon", 20.0, diameter, size))
+
+
+def test_auto_counts_the_start_up_that_a_batch_shares():
+    from bokehfit.kernels.accuracy import plan_kernel
+
+    # A large rim kernel is tabulated on 8×8 sub-pixels: costly enough that a sampling
+    # method wins even with its device's start-up counted.
+    rim = make_aperture("hexagon", 0.0, rim=0.3)
+    alone = plan_kernel(rim, 600.0, 700, 0.01, count_startup=True)
+    assert alone.method != "exact"
+    # Where exact costs a few milliseconds, it wins for a kernel drawn alone; in a batch
+    # (no start-up counted) the sampling methods' bare per-kernel cost is what counts.
+    pentagon = make_aperture("pentagon", 0.0)
+    assert plan_kernel(pentagon, 100.0, 127, 0.01, count_startup=True).method == "exact"
+    shared = plan_kernel(rim, 600.0, 700, 0.01)
+    assert shared.predicted_time_s < alone.predicted_time_s
+
+
+def test_auto_without_tolerance_is_exact():
+    kernel = compute_kernel("star", 0.0, 30.0, 49, method="auto")
+    assert kernel.method == "exact"
+
+
+def test_unknown_method_lists_auto():
+    from bokehfit.errors import InputError
+
+    with pytest.raises(InputError, match=r"^method must be one of exact, mc, raster, auto \(got 'fastest'\)"):
+        compute_kernel("star", 0.0, 30.0, 49, method="fastest")

@@ -12,6 +12,7 @@ folder (printed; ``$BOKEHFIT_TEST_ARTIFACTS`` names another).
 
 from __future__ import annotations
 
+import base64
 import io
 import json
 import math
@@ -107,7 +108,7 @@ def test_uniform_layout_is_render_params(server):
     assert layout["size_bytes"] == RENDER_PARAMS.dtype.itemsize
     assert layout["wgsl"] == RENDER_PARAMS.wgsl()
     assert config["shader"]["entry_point"] == "main" and config["shader"]["workgroup_size"] == [8, 8, 1]
-    assert [s["name"] for s in config["shapes"]] == [name for name, spec in SHAPES.items() if not spec.tabulated]  # no mask yet
+    assert [s["name"] for s in config["shapes"]] == list(SHAPES)
 
 
 def test_shader_is_the_package_wgsl_with_includes_resolved(server):
@@ -455,8 +456,10 @@ def test_corner_toggle_reveals_the_controls(browser, server, artifacts):
         for selector in CONTROLS:
             assert page.is_visible(selector), f"{selector} is hidden in edit mode"
         assert not page.is_visible("#blades") and not page.is_visible("#aspect")
-        options = page.eval_on_selector_all("#shape option", "options => options.map(o => o.value)")
-        assert options == [name for name, spec in SHAPES.items() if not spec.tabulated]  # the viewer draws no mask yet
+        options = page.eval_on_selector_all("#shape option", "options => options.map(o => [o.value, o.disabled])")
+        # A mask shape waits for its image: the option is there, and off until a PNG is uploaded.
+        assert options == [[name, spec.tabulated] for name, spec in SHAPES.items()]
+        assert page.is_visible("#mask-file")
         page.select_option("#shape", "ngon")
         assert page.is_visible("#blades") and not page.is_visible("#aspect")
         page.select_option("#shape", "slit")
@@ -542,6 +545,43 @@ def test_browser_traces_the_same_paths_as_python(browser, server, gpu):
     same = (np.abs(browser_image - python_image).max(axis=-1) <= SAME_PIXEL_TOLERANCE).mean()
     assert same >= MIN_SAME_PIXEL_FRACTION, f"only {same:.0%} of the pixels agree with the Python renderer"
     np.testing.assert_allclose(browser_image.mean(axis=(0, 1)), python_image.mean(axis=(0, 1)), rtol=0.05)
+
+
+def test_uploaded_mask_traces_the_same_paths_as_python(browser, server, gpu, tmp_path):
+    """A PNG in the mask input: the server builds its table, the page binds it, and the frame is Python's."""
+    from bokehfit.scene import render
+
+    transmission = np.zeros((9, 9))
+    transmission[1:8, 2:7] = 1.0
+    transmission[1:4, 2:4] = 0.4  # a grey corner: the mask is neither symmetric nor binary
+    path = tmp_path / "stop.png"
+    Image.fromarray(np.round(transmission * 255).astype(np.uint8), "L").save(path)
+    page = open_page(browser, server, "max_spp=4&mode=edit&angle=30&fstop=1.4")
+    try:
+        page.wait_for_function("window.bokehfitViewer.spp === 4", timeout=PAGE_TIMEOUT_MS)
+        circle = page.evaluate("window.bokehfitViewer.readImage()")
+        restarts = page.evaluate("window.bokehfitViewer.restarts")
+        page.set_input_files("#mask-file", str(path))
+        page.wait_for_function(f"window.bokehfitViewer.restarts > {restarts} && window.bokehfitViewer.spp === 4", timeout=PAGE_TIMEOUT_MS)
+        state = page.evaluate("window.bokehfitViewer.state")
+        assert state["shape"] == "mask" and state["mask"] == make_aperture("mask", mask=str(path)).mask.digest
+        assert page.input_value("#shape") == "mask"
+        assert "stop.png" in page.text_content("#message") and "mask 9×9" in page.text_content("#settings")
+        frame = page.evaluate("window.bokehfitViewer.readImage()")
+        saved = png_text_chunks(base64.b64decode(page.evaluate("window.bokehfitViewer.pngBase64()")))
+        assert "--shape mask" in json.loads(saved["bokehfit"])["command_line"]
+        assert "--mask stop.png" in json.loads(saved["bokehfit"])["command_line"]
+        assert page.errors == []
+    finally:
+        page.close()
+    assert frame["samples"] == 4
+    shape = (frame["height"], frame["width"], 3)
+    browser_image = np.asarray(frame["rgb"], dtype=np.float32).reshape(shape)
+    python_image = render("cornell", shape="mask", mask=str(path), angle_deg=30.0, fstop=1.4, spp=4, width=frame["width"], height=frame["height"]).image
+    same = (np.abs(browser_image - python_image).max(axis=-1) <= SAME_PIXEL_TOLERANCE).mean()
+    assert same >= MIN_SAME_PIXEL_FRACTION, f"only {same:.0%} of the pixels agree with the Python renderer"
+    before = np.asarray(circle["rgb"], dtype=np.float32).reshape(shape)
+    assert (np.abs(browser_image - before).max(axis=-1) > SAME_PIXEL_TOLERANCE).mean() > 0.5, "the mask did not change the frame"
 
 
 def test_matched_aperture_from_a_compare_result(browser, server, tmp_path):

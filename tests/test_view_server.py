@@ -8,6 +8,7 @@ test asserts a status line, a one-line JSON error and no traceback.
 
 from __future__ import annotations
 
+import io
 import json
 import re
 import signal
@@ -19,9 +20,15 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
+import numpy as np
 import pytest
+from PIL import Image
 
+from bokehfit.apertures import SHAPES, MaskTable, make_aperture
+from bokehfit.apertures.mask import MAX_MASK_SIDE
+from bokehfit.errors import InputError
 from bokehfit.view import ViewerServer
+from bokehfit.view.server import MaskStore
 
 #: Longest wait for one answer (s).
 ANSWER_TIMEOUT_S = 15.0
@@ -357,3 +364,82 @@ def test_200_concurrent_connections_are_all_answered(tmp_path):
     assert process.returncode == 0, err
     assert "Traceback" not in err and "internal error" not in err, err[-2000:]
     print(f"{CONNECTIONS} concurrent connections answered in {elapsed:.2f} s")
+
+
+# --- the custom mask: POST /mask, GET /mask_table, /params.json?shape=mask ---------------------
+
+
+def png_bytes(transmission: np.ndarray) -> bytes:
+    """An 8-bit greyscale PNG of ``transmission`` in [0, 1]."""
+    out = io.BytesIO()
+    Image.fromarray(np.round(transmission * 255).astype(np.uint8), "L").save(out, "PNG")
+    return out.getvalue()
+
+
+def test_mask_entry_is_served(server):
+    config = json.loads(exchange(server.port, request(server.port)).body)
+    entries = {entry["name"]: entry for entry in config["shapes"]}
+    assert list(entries) == list(SHAPES)
+    assert entries["mask"]["tabulated"] and entries["mask"]["has_angle"]
+    assert not any(entry["tabulated"] for name, entry in entries.items() if name != "mask")
+    assert config["defaults"]["mask"] is None and config["mask_upload"]["url"] == "/mask"
+    assert config["shader"]["bindings"]["mask_table"] == {"group": 0, "binding": 2, "space": "storage"}
+
+
+def test_uploaded_mask_gives_its_table_and_the_lens_values(server):
+    """The upload is read by the command line's code: the same table, digest, tables and uniform values as ``--mask``."""
+    transmission = np.round(np.outer(np.hanning(11)[1:-1], np.hanning(7)[1:-1]) * 255) / 255
+    transmission[0, 0] = 1.0
+    answer = exchange(server.port, request(server.port, "POST", "/mask", headers=[("Content-Type", "image/png")], body=png_bytes(transmission)))
+    assert answer.status == 200, answer.body[:300]
+    upload = json.loads(answer.body)
+    table = MaskTable.from_array(transmission)
+    assert (upload["mask"], upload["width"], upload["height"], upload["table_floats"]) == (table.digest, 5, 9, table.gpu_table().size)
+
+    answer = exchange(server.port, request(server.port, "GET", upload["table_url"]))
+    assert answer.status == 200 and answer.headers["content-type"] == "application/octet-stream"
+    np.testing.assert_array_equal(np.frombuffer(answer.body, dtype="<f4"), table.gpu_table())
+
+    answer = exchange(server.port, request(server.port, "GET", f"/params.json?shape=mask&mask={table.digest}&angle=25&width=64&height=48"))
+    assert answer.status == 200, answer.body[:300]
+    params = json.loads(answer.body)
+    expected = make_aperture("mask", 25.0, mask=table).shader_params()
+    for name in ("shape", "mask_width", "mask_height", "mask_cell", "cos_angle"):
+        assert params["values"][name] == pytest.approx(float(np.float32(expected[name]))), name
+    assert params["lens"]["mask"] == {"width": 5, "height": 9, "sha256": table.digest}
+    assert params["describe"].startswith(f"mask 5×9 {table.digest[:8]} 25°")
+
+
+@pytest.mark.parametrize(
+    "path,body,needle",
+    [
+        ("/mask", b"not a png at all", "mask must be a readable image file (PNG)"),
+        ("/mask", png_bytes(np.zeros((4, 4))), "mask must transmit some light"),
+        ("/mask", png_bytes(np.ones((3, MAX_MASK_SIDE + 1))), f"at most {MAX_MASK_SIDE}"),
+        ("/params.json?shape=mask", None, "upload a PNG"),
+        ("/params.json?shape=mask&mask=0123abcd", None, "upload the PNG again"),
+        ("/mask_table?mask=" + "f" * 64, None, "upload the PNG again"),
+        ("/mask_table", None, "mask must name an uploaded mask"),
+    ],
+    ids=["garbage", "black", "too-wide", "no-mask", "unknown-mask", "unknown-table", "no-table"],
+)
+def test_bad_mask_uploads_and_names_answer_400(server, path, body, needle):
+    method = "POST" if body is not None else "GET"
+    assert_refused(exchange(server.port, request(server.port, method, path, body=body)), 400, needle)
+
+
+def test_empty_mask_body_names_what_to_send(server):
+    answer = exchange(server.port, request(server.port, "POST", "/mask", headers=[("Content-Length", "0")], body=b""))
+    assert_refused(answer, 400, "send an image file (PNG)")
+
+
+def test_mask_store_keeps_the_most_recently_used():
+    store = MaskStore(capacity=2)
+    tables = [MaskTable.from_array(np.full((2, 2), v)) for v in (0.25, 0.5, 0.75)]
+    store.add(tables[0])
+    store.add(tables[1])
+    assert store.get(tables[0].digest) == tables[0]  # now the most recent: tables[1] goes first
+    store.add(tables[2])
+    assert store.get(tables[0].digest) == tables[0] and store.get(tables[2].digest) == tables[2]
+    with pytest.raises(InputError, match="upload the PNG again"):
+        store.get(tables[1].digest)

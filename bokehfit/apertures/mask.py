@@ -33,7 +33,7 @@ import numpy as np
 
 from bokehfit.errors import InputError
 
-__all__ = ["MAX_MASK_SIDE", "MaskTable", "invert_mask_sample", "load_mask", "mask_pdf", "sample_mask"]
+__all__ = ["MAX_MASK_SIDE", "MaskTable", "decode_mask", "invert_mask_sample", "load_mask", "mask_pdf", "sample_mask"]
 
 #: Largest mask image accepted, pixels a side (the CDF tables then hold about 1 M floats).
 MAX_MASK_SIDE = 1024
@@ -150,13 +150,37 @@ def load_mask(path, name: str = "mask") -> MaskTable:
     transmission in [0, 1]; an alpha channel is ignored. RGB becomes luminance
     with the ITU-R 601-2 weights of Pillow's ``convert("L")``.
     """
-    from PIL import Image, UnidentifiedImageError
-
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{name} must be an image file (PNG); {str(path)!r} does not exist")
+    return _read_image(path, repr(str(path)), name)
+
+
+def decode_mask(data: bytes, name: str = "mask", source: str = "the upload") -> MaskTable:
+    """A :class:`MaskTable` from the bytes of an image file (PNG), read as :func:`load_mask` reads a file.
+
+    ``source`` names where the bytes came from in error messages.
+    """
+    import io
+
+    if not isinstance(data, (bytes, bytearray)) or not data:
+        raise InputError(f"{name} must be the bytes of an image file (PNG) (got nothing from {source})")
+    return _read_image(io.BytesIO(data), source, name)
+
+
+def _read_image(source, where: str, name: str) -> MaskTable:
+    """The transmission table of the image file ``source`` (a path or a binary file object).
+
+    The size is checked before the pixels are decoded, so that a small file
+    claiming a huge image costs nothing.
+    """
+    from PIL import Image, UnidentifiedImageError
+
     try:
-        with Image.open(path) as image:
+        with Image.open(source) as image:
+            width, height = image.size
+            if max(width, height) > MAX_MASK_SIDE:
+                raise InputError(f"{name} must be at most {MAX_MASK_SIDE}×{MAX_MASK_SIDE} pixels (got {width}×{height} in {where})")
             image.load()
             mode = image.mode
             if mode in ("I;16", "I;16B", "I;16L", "I"):
@@ -164,9 +188,10 @@ def load_mask(path, name: str = "mask") -> MaskTable:
             elif mode in ("L", "LA", "P", "RGB", "RGBA", "1"):
                 array = np.asarray(image.convert("L"), dtype=np.float64) / 255.0
             else:
-                raise InputError(f"{name} must be a greyscale or RGB image of 8 or 16 bits (got mode {mode!r} in {str(path)!r})")
+                raise InputError(f"{name} must be a greyscale or RGB image of 8 or 16 bits (got mode {mode!r} in {where})")
     except (UnidentifiedImageError, OSError) as error:
-        raise InputError(f"{name} must be a readable image file (PNG) (got {str(path)!r}: {error})") from None
+        reason = "not an image format Pillow reads" if isinstance(error, UnidentifiedImageError) else str(error)
+        raise InputError(f"{name} must be a readable image file (PNG) (got {where}: {reason})") from None
     return MaskTable.from_array(array, name)
 
 

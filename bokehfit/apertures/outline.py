@@ -16,7 +16,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import brentq
 
 from bokehfit.apertures.samplers import x_minus_sin
 
@@ -168,6 +167,8 @@ def _crossings(piece: Piece, centre: np.ndarray, radius: float) -> list[float]:
         if values[i] == 0.0 and 0 < i:
             found.append(float(taus[i]))
         elif values[i] * values[i + 1] < 0.0:
+            from scipy.optimize import brentq  # on first use: scipy.optimize takes ~0.3 s to import
+
             found.append(brentq(g, taus[i], taus[i + 1], xtol=1e-15, rtol=1e-15))
     return found
 

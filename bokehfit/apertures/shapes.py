@@ -240,8 +240,9 @@ class Aperture:
 
     @property
     def display_name(self) -> str:
-        """The shape's name for people: ``hexagon``, ``9-blade polygon``."""
-        return f"{self.blades}-blade polygon" if self.spec.takes_blades else self.shape
+        """The shape's name for people: ``hexagon``, ``9-blade polygon``, ``rounded 9-blade polygon``."""
+        name = f"{self.blades}-blade polygon" if self.spec.takes_blades else self.shape
+        return f"rounded {name}" if "roundness" in self.enabled_features else name
 
     def is_named(self, text: str) -> bool:
         """Whether ``text`` names this aperture's shape (see :func:`parse_shape`).
@@ -526,6 +527,18 @@ class Aperture:
         a, b = corners[k], corners[(k + 1) % n]
         normal = np.stack([b[..., 1] - a[..., 1], a[..., 0] - b[..., 0]], axis=-1)
         return np.sum(p * normal, axis=-1) / np.sum(a * normal, axis=-1)
+
+    def outline_radius(self, theta: np.ndarray) -> np.ndarray:
+        """Distance from the centre to the outline at angle 0 (unit area) in the directions ``theta`` (radians).
+
+        Exact for every shape the centre sees whole (star-shaped about it): the
+        circle, the polygons and the rounded n-gons, the slit, the star.
+        """
+        theta = np.asarray(theta, dtype=np.float64)
+        directions = np.stack([np.cos(theta), np.sin(theta)], axis=-1)
+        if self.squeeze != 1.0:  # a point t·d of the squeezed outline is S·p0 with p0 on the unsqueezed one
+            directions = directions @ np.linalg.inv(self.squeeze_matrix()).T
+        return 1.0 / self._radial_fraction_at_zero(directions)
 
     def _sample_at_zero(self, u: np.ndarray) -> np.ndarray:
         family = self.spec.family

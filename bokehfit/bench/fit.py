@@ -88,13 +88,18 @@ def grid_layout(shape, blades, aspect, angle, diameters, rng, brightness=(0.3, 0
 
 
 def write_jpeg(path: Path, linear: np.ndarray, quality: int) -> None:
-    """Encode a linear-light image as an sRGB JPEG of the given quality, atomically."""
+    """Encode a linear-light image, (H, W) grey or (H, W, 3) RGB, as an sRGB JPEG of the given quality, atomically."""
     import cv2
 
     from bokehfit.outputs import write_bytes_atomic
     from bokehfit.synthetic import encode_srgb8
 
-    ok, data = cv2.imencode(".jpg", encode_srgb8(linear), [cv2.IMWRITE_JPEG_QUALITY, quality])
+    encoded = encode_srgb8(linear)
+    options = [cv2.IMWRITE_JPEG_QUALITY, quality]
+    if encoded.ndim == 3:
+        encoded = np.ascontiguousarray(encoded[..., ::-1])  # RGB → OpenCV's BGR
+        options += [cv2.IMWRITE_JPEG_SAMPLING_FACTOR, cv2.IMWRITE_JPEG_SAMPLING_FACTOR_420]  # chroma halved, as cameras do
+    ok, data = cv2.imencode(".jpg", encoded, options)
     if not ok:
         raise OSError(f"could not encode {path} as JPEG")
     write_bytes_atomic(Path(path), data.tobytes())

@@ -12,7 +12,7 @@ import html
 import io
 import math
 
-__all__ = ["build_html", "compare_table", "fit_table", "format_tables", "kernel_table", "markdown_table"]
+__all__ = ["build_html", "compare_table", "fit_table", "format_tables", "kernel_table", "markdown_table", "target_table"]
 
 #: Line colour and marker of each kernel variant, by label.
 _STYLES = {
@@ -105,6 +105,39 @@ def compare_table(result: dict) -> tuple[list[str], list[list[str]]]:
     return header, rows
 
 
+#: (label, key in the compare result, format, unit) of :func:`target_table`, in the order of ``TARGETS``.
+_TARGET_ROWS = (
+    ("warm compare", "total_s", ".2f", " s"),
+    ("warm compare / bare decode", "warm_over_decode", ".1f", "×"),
+    ("cold process, start to exit", "cold_process_s", ".2f", " s"),
+    ("(load + detect) / bare decode, warm", "load_detect_over_decode", ".1f", "×"),
+    ("peak memory of the cold process", "peak_bytes_per_px", ".1f", " B/px"),
+)
+_TARGET_KEYS = ("warm_s", "warm_over_decode", "cold_process_s", "load_detect_over_decode", "peak_bytes_per_px")
+
+
+def target_table(result: dict) -> tuple[list[str], list[list[str]]]:
+    """(header, rows): each figure the targets speak of, measured, beside its target and whether it is met."""
+    c = result["compare"]
+    targets = c.get("targets", {})
+    header = ["figure", "measured", "target (24 MP, 2 cores)", "met"]
+    rows = []
+    for (label, key, fmt, unit), target_key in zip(_TARGET_ROWS, _TARGET_KEYS):
+        value, target = c.get(key), targets.get(target_key)
+        met = "—" if value is None or target is None else ("yes" if value <= target else "no")
+        rows.append([label, _num(value, fmt) + unit, "—" if target is None else f"≤ {target:g}{unit}", met])
+    return header, rows
+
+
+def _memory_line(c: dict) -> str:
+    if c.get("peak_bytes") is None:
+        return ""
+    return (f"bare decode (cv2.imread, best of 3): {c['decode_s']:.3f} s; peak memory: the cold process's peak RSS "
+            f"(VmHWM) after compare minus its RSS before it (after the imports), {c['peak_bytes'] / 2**20:.0f} MiB "
+            f"over {c['width'] * c['height'] / 1e6:.1f} M pixels ({c['rss_before_bytes'] / 2**20:.0f} MiB before, "
+            f"{c['rss_peak_bytes'] / 2**20:.0f} MiB at the peak)")
+
+
 def _cut_off_line(result: dict) -> str:
     limit = result["settings"].get("max_point_s")
     if limit is None:
@@ -126,43 +159,52 @@ def format_tables(result: dict) -> str:
     """The whole result as text (Markdown tables) for the terminal."""
     device, c = result["device"], result["compare"]
     runtime = result["runtime_s"]
+    parts = result.get("parts", "abc")
     out = [
         f"bokehfit {result['bokehfit_version']} bench{' --quick' if result['quick'] else ''}: "
         f"{device['adapter']} ({device['backend']}); OpenGL: {device['gl_renderer']}; "
         f"Python {result['platform']['python']}, {result['platform']['cpus']} CPUs",
-        "",
-        f"## (a) Kernel error against time: L1 to the exact kernel (render time, ms), {result['settings']['angle_deg']:g}°",
-        "",
-        markdown_table(*kernel_table(result), left=4),
-        "",
-        "rate: slope of log L1 against log samples over the points with ≥ 1 sample per disc pixel; "
-        "counts are requested samples (mc stratified rounds up to m², raster to whole passes: the JSON has the drawn ones)",
     ]
-    out.append(_cut_off_line(result))
-    out += [f"note: {note}" for note in result["notes"]]
-    out += [
-        "",
-        "## (b) Fit error against fit time (budget knob: FitOptions.max_discs)",
-        "",
-        result["fit_set"],
-        "",
-        markdown_table(*fit_table(result)),
-    ]
-    for budget, names in result["fit_misses"].items():
-        out.append(f"wrong shape at max_discs={budget}: {', '.join(names)}")
-    out += [
-        "",
-        f"## (c) compare on a {c['megapixels']:.1f}-MP JPEG ({c['width']}×{c['height']}, {c['discs_drawn']} {c['truth']} discs), seconds",
-        "",
-        markdown_table(*compare_table(result)),
-        "",
-        f"found {c['discs_found']} discs ({c['discs_usable']} clean), fitted {c['discs_fitted']}: {c['aperture']}; "
-        f"warm-up call on a {c['warmup_megapixels']:.2f}-MP photo: {c['warmup_total_s']:.2f} s; cold process: import "
-        f"bokehfit.compare {c['cold_import_s']:.2f} s, start to exit {c['cold_process_s']:.2f} s",
-        "",
-        f"bench run time: kernels {runtime['kernel']:.1f} s, fit {runtime['fit']:.1f} s, "
-        f"compare {runtime['compare']:.1f} s, total {runtime['total']:.1f} s",
-    ]
+    if "a" in parts:
+        out += [
+            "",
+            f"## (a) Kernel error against time: L1 to the exact kernel (render time, ms), {result['settings']['angle_deg']:g}°",
+            "",
+            markdown_table(*kernel_table(result), left=4),
+            "",
+            "rate: slope of log L1 against log samples over the points with ≥ 1 sample per disc pixel; counts are "
+            "requested samples (mc stratified rounds up to m², raster to whole passes: the JSON has the drawn ones)",
+            _cut_off_line(result),
+        ]
+        out += [f"note: {note}" for note in result["notes"]]
+    if "b" in parts:
+        out += [
+            "",
+            "## (b) Fit error against fit time (budget knob: FitOptions.max_discs)",
+            "",
+            result["fit_set"],
+            "",
+            markdown_table(*fit_table(result)),
+        ]
+        for budget, names in result["fit_misses"].items():
+            out.append(f"wrong shape at max_discs={budget}: {', '.join(names)}")
+    if "c" in parts:
+        out += [
+            "",
+            f"## (c) compare on a {c['megapixels']:.1f}-MP {c.get('colour', 'grey')} JPEG ({c['width']}×{c['height']}, "
+            f"{c['discs_drawn']} {c['truth']} discs), seconds",
+            "",
+            markdown_table(*compare_table(result)),
+            "",
+            f"found {c['discs_found']} discs ({c['discs_usable']} clean), fitted {c['discs_fitted']}: {c['aperture']}; "
+            f"kernel {c.get('kernel_method')} (cold: {c.get('cold_kernel_method')}); warm-up call on a "
+            f"{c['warmup_megapixels']:.2f}-MP photo: {c['warmup_total_s']:.2f} s; cold process: import "
+            f"bokehfit.compare {c['cold_import_s']:.2f} s, start to exit {c['cold_process_s']:.2f} s",
+        ]
+        if "decode_s" in c:
+            out += ["", markdown_table(*target_table(result)), "", _memory_line(c)]
+    ran = ", ".join(f"{name} {runtime[name]:.1f} s" for name in ("kernel", "fit", "compare") if name in runtime)
+    out += ["", f"bench run time: {ran}, total {runtime['total']:.1f} s"]
     return "\n".join(out)
 
 
@@ -305,30 +347,43 @@ def build_html(result: dict) -> str:
         f"<p class='summary'>WebGPU: {html.escape(device['adapter'])} ({html.escape(device['backend'])}); "
         f"OpenGL: {html.escape(device['gl_renderer'])}; Python {html.escape(result['platform']['python'])}, "
         f"{result['platform']['cpus']} CPUs. Run time {runtime['total']:.1f} s.</p>",
-        "<h2>(a) Kernel error against render time</h2>",
-        "<p>L1 distance of each kernel to the exact one, against <code>Kernel.time_s</code> (after a warm-up "
-        "render per method). The exact method is the star: its error is only float32 rounding.</p>",
-        _img(_kernel_figure(result, "time_s"), "kernel L1 against render time"),
-        "<p>The same errors against the samples drawn; the legend gives the fitted convergence rate "
-        "(slope of log L1 against log samples, from one sample per disc pixel up).</p>",
-        _img(_kernel_figure(result, "samples"), "kernel L1 against samples"),
-        "<p>Cells: L1 (render time in ms) at each requested sample count.</p>",
-        _table(*kernel_table(result)),
     ]
-    parts += [f"<p class='note'>{html.escape(line)}</p>" for line in [_cut_off_line(result), *result["notes"]]]
+    parts_run = result.get("parts", "abc")
+    if "a" in parts_run:
+        parts += [
+            "<h2>(a) Kernel error against render time</h2>",
+            "<p>L1 distance of each kernel to the exact one, against <code>Kernel.time_s</code> (after a warm-up "
+            "render per method). The exact method is the star: its error is only float32 rounding.</p>",
+            _img(_kernel_figure(result, "time_s"), "kernel L1 against render time"),
+            "<p>The same errors against the samples drawn; the legend gives the fitted convergence rate "
+            "(slope of log L1 against log samples, from one sample per disc pixel up).</p>",
+            _img(_kernel_figure(result, "samples"), "kernel L1 against samples"),
+            "<p>Cells: L1 (render time in ms) at each requested sample count.</p>",
+            _table(*kernel_table(result)),
+        ]
+        parts += [f"<p class='note'>{html.escape(line)}</p>" for line in [_cut_off_line(result), *result["notes"]]]
+    if "b" in parts_run:
+        parts += [
+            "<h2>(b) Fit error against fit time</h2>",
+            f"<p>{html.escape(result['fit_set'])}. The budget knob is <code>FitOptions.max_discs</code>; "
+            "budget_s is the mean measured fit time per photo.</p>",
+            _img(_fit_figure(result), "fit error against fit time"),
+            _table(*fit_table(result)),
+        ]
+    if "c" in parts_run:
+        parts += [
+            f"<h2>(c) compare on a {c['megapixels']:.1f}-MP JPEG</h2>",
+            f"<p>{c['width']}×{c['height']} {html.escape(c.get('colour', 'grey'))}, {c['discs_drawn']} "
+            f"{html.escape(c['truth'])} discs; found {c['discs_found']} ({c['discs_usable']} clean), fitted "
+            f"{c['discs_fitted']}: {html.escape(str(c['aperture']))}; kernel {html.escape(str(c.get('kernel_method')))}. "
+            f"The warm call follows a warm-up call on a {c['warmup_megapixels']:.2f}-MP photo; the cold one is the "
+            f"first call of a fresh process (import of bokehfit.compare before it: {c['cold_import_s']:.2f} s).</p>",
+            _img(_compare_figure(result), "compare time by stage"),
+            _table(*compare_table(result)),
+        ]
+        if "decode_s" in c:
+            parts += [_table(*target_table(result)), f"<p class='note'>{html.escape(_memory_line(c))}</p>"]
     parts += [
-        "<h2>(b) Fit error against fit time</h2>",
-        f"<p>{html.escape(result['fit_set'])}. The budget knob is <code>FitOptions.max_discs</code>; "
-        "budget_s is the mean measured fit time per photo.</p>",
-        _img(_fit_figure(result), "fit error against fit time"),
-        _table(*fit_table(result)),
-        f"<h2>(c) compare on a {c['megapixels']:.1f}-MP JPEG</h2>",
-        f"<p>{c['width']}×{c['height']}, {c['discs_drawn']} {html.escape(c['truth'])} discs; found {c['discs_found']} "
-        f"({c['discs_usable']} clean), fitted {c['discs_fitted']}: {html.escape(str(c['aperture']))}. The warm call "
-        f"follows a warm-up call on a {c['warmup_megapixels']:.2f}-MP photo; the cold one is the first call of a "
-        f"fresh process (import of bokehfit.compare before it: {c['cold_import_s']:.2f} s).</p>",
-        _img(_compare_figure(result), "compare time by stage"),
-        _table(*compare_table(result)),
         f"<p><small>{html.escape(result['command_line'])}; bokehfit {html.escape(result['bokehfit_version'])}, "
         f"schema_version {result['schema_version']}</small></p></body></html>",
     ]

@@ -24,8 +24,7 @@ def add_feature_arguments(
     comparison; ``outline_only`` leaves out the options that change the light
     but not the outline (a comparison of outlines has no use for them).
     ``mask`` adds the transmission image of shape ``mask`` (design.md §3b),
-    for the commands that draw it (``kernel``, ``similarity``; the path
-    tracer and the viewer do not sample masks yet).
+    for the commands that draw it (``kernel``, ``render``, ``similarity``).
     """
 
     def option(name: str) -> str:

@@ -26,6 +26,12 @@ def add_parser(subparsers) -> None:
         help="the CI size: samples 1e3-1e6 at 64 px, a 2-photo fit set, a 4-MP photo, under a minute "
         "(default: the full size, 1e3-1e8 samples and a 24-MP photo)",
     )
+    parser.add_argument(
+        "--parts",
+        default="abc",
+        metavar="LETTERS",
+        help="run only these parts, e.g. --parts c for compare alone (default abc: all three)",
+    )
     parser.add_argument("--json", metavar="OUT.json", help="write every figure as JSON (schema_version 1)")
     parser.add_argument("--html", metavar="OUT.html", help="write the report with its plots as one HTML page")
     parser.set_defaults(run=run)
@@ -62,7 +68,8 @@ def run(args: argparse.Namespace) -> dict:
 
     progress = _Progress()
     try:
-        result = run_bench(args.quick, progress=progress, command_line=args.command_line, adapter=args.adapter)
+        result = run_bench(args.quick, progress=progress, command_line=args.command_line, adapter=args.adapter,
+                           parts=args.parts)
     finally:
         progress.close()
     print(format_tables(result))

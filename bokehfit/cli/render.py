@@ -79,7 +79,7 @@ def add_parser(subparsers) -> None:
     )
     parser.add_argument("--aspect", type=arg_type("aspect", "--aspect"), default=None, metavar="A", help="width/height of a slit (default 0.3)")
     parser.add_argument("--blades", type=arg_type("blades", "--blades"), default=None, metavar="N", help=f"blade count of an ngon, {interval('blades')} (default: none)")
-    add_feature_arguments(parser)
+    add_feature_arguments(parser, mask=True)
     parser.add_argument("--spp", type=arg_type("spp", "--spp"), default=64, metavar="N", help=f"samples per pixel, {interval('spp')} (default 64)")
     parser.add_argument("--size", default="512x512", metavar="WxH", help=f"image size in pixels, each side {interval('image_side_px')} (default 512x512)")
     parser.add_argument("--seed", type=arg_type("seed", "--seed"), default=0, metavar="S", help="random seed; the same seed gives the same image (default 0)")
@@ -146,6 +146,7 @@ def run(args: argparse.Namespace) -> RenderResult:
         vignetting=None if args.vignetting is None else dict(zip(("radius", "shift"), args.vignetting)),
         rim=args.rim,
         chromatic=None if args.chromatic is None else dict(zip(("red", "blue"), args.chromatic)),
+        mask=args.mask,
     )
     settings = make_settings(width, height, args.spp, args.seed)
     if total_work(scene, lens, settings, args.adapter) > QUICK_WORK:

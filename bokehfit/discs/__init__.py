@@ -53,6 +53,7 @@ __all__ = [
     "MAX_CLUSTER_CANDIDATES",
     "FULL_OUTLINE_SEEN",
     "MIN_OUTLINE_SEEN",
+    "USABLE_EVIDENCE",
 ]
 
 DEFAULT_MIN_DIAMETER_PX = 4.0
@@ -70,6 +71,8 @@ MAX_CLUSTER_CANDIDATES = MAX_CANDIDATES // 20
 #: A disc whose reliable share of the outline reaches this is seen whole (a stray point or two
 #: near a frame corner or a pixel of bloom do not make it partial).
 FULL_OUTLINE_SEEN = 0.98
+#: What a usable disc offers (:attr:`Disc.evidence`), best first.
+USABLE_EVIDENCE = ("plateau", "edge")
 #: Least share of its outline a disc must show to say something about the shape.
 MIN_OUTLINE_SEEN = 0.5
 #: Outline points closer than this (px) inside another disc's outline belong to the overlap.
@@ -113,8 +116,10 @@ class Disc:
 
     @property
     def usable(self) -> bool:
-        """Clean enough to fit a shape to: resolvable, a clean plateau, not saturated, clipped or overlapping."""
-        return self.resolvable and self.evidence == "plateau" and not (self.saturated or self.clipped or self.overlaps)
+        """The fit can use it: resolvable, whole (not cut by the frame or overlapping), and a clean plateau or
+        an outline of its own (``edge``: a saturated disc, fitted with its clipped pixels as lower bounds,
+        or a ring, fitted with the rim profile). Partial outlines are not fitted."""
+        return self.resolvable and self.evidence in USABLE_EVIDENCE and not (self.clipped or self.overlaps)
 
     @property
     def shape_usable(self) -> bool:

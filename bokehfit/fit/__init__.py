@@ -41,10 +41,10 @@ import cv2
 import numpy as np
 
 from bokehfit.apertures import Aperture
-from bokehfit.discs import Disc
+from bokehfit.discs import USABLE_EVIDENCE, Disc
 from bokehfit.errors import InputError
 from bokehfit.fit.families import FAMILIES, Family, families_for
-from bokehfit.fit.pixels import PixelFit, fit_disc_pixels
+from bokehfit.fit.pixels import PixelFit, crop_disc, fit_discs
 from bokehfit.fit.result import FailedFit, FitFailedError, FitOptions, Parameter
 from bokehfit.fit.signature import Screen, screen
 
@@ -65,11 +65,18 @@ FOCUS_SIDES = ("far", "near", "unknown")
 
 @dataclass(frozen=True)
 class DiscFit:
-    """One disc: its screen and its pixel fits, by family name."""
+    """One disc: its screen and its pixel fits, by family name.
+
+    The winner's entry is the disc in the joint fit (the shared aperture);
+    ``own`` is the winner fitted to this disc alone (its own angle, for the
+    spread between discs), and ``turned`` whether it shows the aperture turned by 180°.
+    """
 
     disc: Disc
     screens: list[Screen]
     fits: dict[str, PixelFit]
+    own: PixelFit | None = None
+    turned: bool = False
 
 
 @dataclass(frozen=True)
@@ -89,6 +96,7 @@ class CandidateModel:
             "shape": self.family.aperture.shape,
             "blades": self.family.aperture.blades,
             "name": self.family.name,
+            "display_name": self.family.aperture.display_name,
             "angle_deg": None if self.angle_deg is None else round(self.angle_deg, 3),
             "score": round(-self.delta_bic, 2) + 0.0,
             "delta_bic": round(self.delta_bic, 2),
@@ -124,6 +132,15 @@ class ApertureFit:
     sure: bool
     options: FitOptions = FitOptions()
     time_s: float = 0.0
+    #: The aperture as the discs show it (``aperture`` turned back for near discs: 180°, −rim, ...).
+    seen_aperture: Aperture | None = None
+    #: Discs fitted and then left out because the others' consensus does not share them: index → reason.
+    rejected: dict = dataclasses.field(default_factory=dict)
+    #: Each §3b feature tried on the joint fit → the BIC it gained (added when ≥ FEATURE_DELTA_BIC).
+    feature_tests: dict = dataclasses.field(default_factory=dict)
+    #: One standard deviation of each shared aperture parameter of the joint fit, by name.
+    feature_uncertainty: dict = dataclasses.field(default_factory=dict)
+    notes: tuple = ()  #: models set aside and why (an elongation the discs do not share)
     success = True
 
     def __bool__(self) -> bool:
@@ -134,25 +151,45 @@ class ApertureFit:
         return self.candidates[0].family
 
     @property
+    def runner_up(self) -> CandidateModel | None:
+        """The best model of another shape (the winner rounded or straight is the same shape); None if none."""
+        return next((m for m in self.candidates[1:] if m.family.base != self.family.base), None)
+
+    @property
     def margin_bic(self) -> float | None:
-        """The runner-up's BIC above the winner's (None when only one model was tried)."""
-        return self.candidates[1].delta_bic if len(self.candidates) > 1 else None
+        """The runner-up's BIC above the winner's (None when no other shape was tried)."""
+        runner_up = self.runner_up
+        return None if runner_up is None else runner_up.bic - self.candidates[0].bic
 
     @property
     def parameters(self) -> dict[str, Parameter]:
         """The fitted quantities by JSON name, each with its uncertainty.
 
-        The real-lens features of design.md §3b are not fitted yet: they are
-        listed with value None, so that a reader sees they were not estimated.
+        A §3b feature that was fitted has its value; one that was tested and
+        not needed its neutral value (roundness 0 for a straight n-gon, rim 0,
+        no vignetting); one that was not estimated None.
         """
         aperture = self.aperture
         angle = aperture.canonical_angle_deg
+        sigma = self.feature_uncertainty
+        tested = self.feature_tests
+        roundness = None
+        if aperture.spec.rounds:
+            roundness = Parameter("roundness", aperture.roundness, sigma.get("roundness"))
+        rim = None
+        if "rim" in aperture.enabled_features or "rim" in tested:
+            rim = Parameter("rim", aperture.rim, sigma.get("rim"))
+        vignetting = None
+        if aperture.vignetting is not None:
+            vignetting = Parameter("vignetting", {"radius": aperture.vignetting.radius, "shift": aperture.vignetting.shift},
+                                   {"radius": sigma.get("vignetting_radius"), "shift": sigma.get("vignetting_shift")})
+        features = {"roundness": roundness, "rim": rim, "vignetting": vignetting}
         return {
             "angle_deg": Parameter("angle_deg", angle, self.angle_uncertainty_deg if angle is not None else None),
             "diameter_px": Parameter("diameter_px", self.diameter_px, self.diameter_uncertainty_px),
             "aspect": Parameter("aspect", aperture.aspect),
             "edge_blur_px": Parameter("edge_blur_px", self.blur_px),
-            **{name: Parameter(name, None) for name in LENS_FEATURES},
+            **{name: features.get(name) or Parameter(name, None) for name in LENS_FEATURES},
         }
 
     def to_json(self) -> dict:
@@ -174,22 +211,53 @@ class ApertureFit:
         return data
 
     def disc_fit(self, disc: Disc) -> PixelFit | None:
-        """The winning family's fit of ``disc``, if it was fitted."""
-        for item in self.disc_fits:
-            if item.disc.index == disc.index:
-                return item.fits.get(self.family.name)
-        return None
+        """The winning family's fit of ``disc`` (in the joint fit), if it was used."""
+        item = self.disc_item(disc)
+        return None if item is None else item.fits.get(self.family.name)
+
+    def disc_item(self, disc: Disc) -> DiscFit | None:
+        """Everything fitted to ``disc``, if it was used."""
+        return next((item for item in self.disc_fits if item.disc.index == disc.index), None)
 
 
-#: The real-lens features of design.md §3b, reported (as null) until they are fitted.
+
+#: The real-lens features of design.md §3b; those not estimated are reported as null.
 LENS_FEATURES = ("roundness", "squeeze", "vignetting", "rim", "chromatic")
 #: JSON names of uncertainties that schema 1 named before the ``<name>_uncertainty`` rule (design.md §7, §7b).
 UNCERTAINTY_KEYS = {"angle_deg": "angle_uncertainty_deg", "diameter_px": "diameter_uncertainty_px"}
+#: A §3b feature joins the model when it lowers the joint BIC by at least this (Kass & Raftery: "very strong").
+FEATURE_DELTA_BIC = 10.0
+#: An elongated aperture (a slit) is accepted only when at least this many discs show it ...
+MIN_ELONGATED_DISCS = 3
+#: ... at angles within this spread of each other ...
+ELONGATED_ANGLE_SPREAD_DEG = 10.0
+#: ... and aspects within this spread (the aspects' standard deviation).
+ELONGATED_ASPECT_SPREAD = 0.1
+#: Vignetting is tried only when some fitted disc lies at least this far from the centre (half-diagonals) ...
+VIGNETTING_MIN_FIELD = 0.45
+#: ... and those discs' outlines misfit the shape at least this many times as much as the central ones'.
+VIGNETTING_MISFIT_RATIO = 1.5
+#: Its starting barrel: this shift (R0 per half-diagonal; negative: the barrel's centre towards the
+#: image centre, cutting a disc's outer side), and a radius that cuts the farthest disc this far inside its R0.
+VIGNETTING_START_SHIFT = -1.0
+VIGNETTING_START_CUT = 0.85
+#: Least |rim| reported: a smaller one changes a disc's profile by under 5 % (below what a photo's discs show).
+MIN_RIM = 0.05
+#: Most discs fitted jointly (the clearest first): the shared parameters are settled well before.
+JOINT_DISCS = 8
+#: A disc disagrees with the consensus when its angle is off by more than this many standard deviations ...
+OUTLIER_SIGMAS = 3.0
+#: ... (never less than this many degrees) ...
+MIN_ANGLE_TOLERANCE_DEG = 3.0
+#: ... or its outline misfits the shape by more than this many times the median misfit (and by at least MIN_OUTLIER_RMS).
+OUTLIER_RMS_FACTOR = 3.0
+MIN_OUTLIER_RMS = 0.05
 
 
 def _order_for_fit(discs: list[Disc], max_discs: int) -> list[Disc]:
+    """The discs fitted: clean ones first, then edges; the largest and clearest first within each."""
     usable = [d for d in discs if d.usable]
-    usable.sort(key=lambda d: -d.diameter_px * min(d.snr, 50.0))
+    usable.sort(key=lambda d: (USABLE_EVIDENCE.index(d.evidence), -d.diameter_px * min(d.snr, 50.0)))
     return usable[:max_discs]
 
 
@@ -208,14 +276,23 @@ def _circular_mean(angles: np.ndarray, weights: np.ndarray, period: float) -> tu
     return mean, spread
 
 
+def _angle_offsets(angles: np.ndarray, mean: float, period: float) -> np.ndarray:
+    """Signed differences of ``angles`` from ``mean`` modulo ``period``, in (−period/2, period/2]."""
+    return (np.asarray(angles) - mean + 0.5 * period) % period - 0.5 * period
+
+
+def _angle_sigmas(fits: list[PixelFit]) -> np.ndarray:
+    sigmas = np.array([f.uncertainty.get("angle_deg", np.nan) for f in fits])
+    return np.where(np.isfinite(sigmas) & (sigmas > 0), sigmas, 1.0)
+
+
 def _combine(family: Family, fits: list[PixelFit], screens: list[Screen]) -> CandidateModel:
     diameters = np.array([f.diameter_px for f in fits])
     angle = uncertainty = None
     symmetry = family.aperture.symmetry_deg
     if family.aperture.has_angle:
         angles = np.array([f.angle_deg for f in fits])
-        sigmas = np.array([f.uncertainty.get("angle_deg", np.nan) for f in fits])
-        sigmas = np.where(np.isfinite(sigmas) & (sigmas > 0), sigmas, 1.0)
+        sigmas = _angle_sigmas(fits)
         angle, spread = _circular_mean(angles, 1.0 / sigmas**2, symmetry)
         within = 1.0 / math.sqrt(np.sum(1.0 / sigmas**2))
         uncertainty = math.hypot(spread / math.sqrt(len(fits)), within)
@@ -230,6 +307,123 @@ def _combine(family: Family, fits: list[PixelFit], screens: list[Screen]) -> Can
     )
 
 
+def _elongation_doubt(family: Family, fits: list[PixelFit]) -> str | None:
+    """Why an elongated family (a slit) is not supported by ``fits``; None when it is, or when it is not elongated.
+
+    One blob stretched by an in-focus edge, a cat-eye at the frame's edge or
+    two merged discs looks like a slit; an elongated aperture shows as the
+    same elongation on several discs.
+    """
+    if "aspect" not in family.aperture.parameters:
+        return None
+    if len(fits) < MIN_ELONGATED_DISCS:
+        return f"an elongated aperture needs at least {MIN_ELONGATED_DISCS} discs that agree (only {len(fits)} fitted)"
+    angles = np.array([f.angle_deg for f in fits])
+    _, spread = _circular_mean(angles, np.ones(len(angles)), family.aperture.symmetry_deg)
+    aspects = np.array([f.aperture.aspect for f in fits])
+    if spread > ELONGATED_ANGLE_SPREAD_DEG or np.std(aspects) > ELONGATED_ASPECT_SPREAD:
+        return (f"the discs do not agree on one elongation (angles spread {spread:.0f}°, "
+                f"aspects {aspects.min():.2f}–{aspects.max():.2f})")
+    return None
+
+
+def _turned(family: Family, fits: list[PixelFit]) -> list[bool]:
+    """Which discs show the aperture turned by 180° from the majority (design.md §2: near and far discs).
+
+    Only a shape of odd symmetry tells: turned by 180° it sits half its
+    symmetry away. The majority is taken as seen unturned.
+    """
+    aperture = family.aperture
+    if not aperture.has_angle or not aperture.odd_symmetry:
+        return [False] * len(fits)
+    period = aperture.symmetry_deg
+    angles = np.array([f.angle_deg for f in fits])
+    mean, _ = _circular_mean(angles, 1.0 / _angle_sigmas(fits) ** 2, 0.5 * period)
+    turned = np.abs(_angle_offsets(angles, mean, period)) > 0.25 * period
+    if 2 * int(turned.sum()) > len(fits):
+        turned = ~turned
+    return [bool(t) for t in turned]
+
+
+def _unturned_angles(family: Family, fits: list[PixelFit], turned: list[bool]) -> np.ndarray:
+    """The discs' angles as the unturned discs show the aperture."""
+    half = 0.5 * family.aperture.symmetry_deg
+    return np.array([f.angle_deg - (half if t else 0.0) for f, t in zip(fits, turned)]) % family.aperture.symmetry_deg
+
+
+def _disagreeing(family: Family, fits: list[PixelFit], screens: list[Screen], turned: list[bool]) -> dict[int, str]:
+    """Discs (by position in ``fits``) whose shape or angle the others' consensus does not share, with the reason."""
+    out: dict[int, str] = {}
+    if len(fits) < 3:
+        return out
+    rms = np.array([s.rms for s in screens])
+    limit = max(OUTLIER_RMS_FACTOR * float(np.median(rms)), MIN_OUTLIER_RMS)
+    for i in np.flatnonzero(rms > limit):
+        out[int(i)] = (f"its outline is not the shape the other discs share (misfit {rms[i]:.3f} of its radius, "
+                       f"median {np.median(rms):.3f})")
+    if family.aperture.has_angle:
+        period = family.aperture.symmetry_deg
+        sigmas = _angle_sigmas(fits)
+        angles = _unturned_angles(family, fits, turned)
+        mean, _ = _circular_mean(angles, 1.0 / sigmas**2, period)
+        offsets = _angle_offsets(angles, mean, period)
+        robust = 1.4826 * float(np.median(np.abs(offsets)))
+        for i, (offset, sigma) in enumerate(zip(offsets, sigmas)):
+            tolerance = max(OUTLIER_SIGMAS * math.hypot(robust, sigma), MIN_ANGLE_TOLERANCE_DEG)
+            if abs(offset) > tolerance and i not in out:
+                out[i] = f"its angle is {offset:+.1f}° from the other discs' ({mean:.1f}°, tolerance {tolerance:.1f}°)"
+    if len(out) * 2 > len(fits):  # no majority to disagree with: keep them all, the judge will doubt
+        return {}
+    return out
+
+
+def _consensus_start(family: Family, fits: list[PixelFit], turned: list[bool]) -> Aperture:
+    """The family's aperture at the discs' consensus: circular mean of the angle (as unturned discs show it), median of the rest."""
+    values = {}
+    for name, parameter in fits[0].aperture.parameters.items():
+        own = np.array([f.aperture.values[name] for f in fits])
+        if parameter.periodic is not None:
+            own = _unturned_angles(family, fits, turned)
+            values[name] = _circular_mean(own, 1.0 / _angle_sigmas(fits) ** 2, parameter.periodic)[0]
+        else:
+            values[name] = float(np.median(own))
+    return family.aperture.replace(**values) if values else family.aperture
+
+
+def _fit_start(aperture: Aperture) -> Aperture:
+    """The pixel fit's start from a screen's aperture: a rounded one a little off its straight bound."""
+    if "roundness" in aperture.parameters:
+        return aperture.replace(roundness=max(aperture.roundness, 0.05))
+    return aperture
+
+
+def _add_feature(aperture: Aperture, feature: str, fits: list[PixelFit]) -> Aperture:
+    """``aperture`` with ``feature`` switched on at a start from which the fit can move.
+
+    The vignetting starts as a barrel that just cuts the disc farthest from the centre.
+    """
+    if feature == "vignetting":
+        farthest = max(math.hypot(*f.field_position) for f in fits)
+        shift = VIGNETTING_START_SHIFT
+        return aperture.replace(vignetting_radius=abs(shift) * farthest + VIGNETTING_START_CUT, vignetting_shift=shift)
+    if feature == "rim":
+        return aperture.with_features("rim").replace(rim=0.2)
+    return aperture.with_features(feature)
+
+
+def _feature_tests(fits: list[PixelFit], discs: list[Disc], screens: list[Screen]) -> tuple[str, ...]:
+    """The §3b features worth testing on these discs: the rim where some disc is a ring (a bright rim);
+    the vignetting where at least 3 discs were fitted, some lie far enough from the centre to be cut
+    (VIGNETTING_MIN_FIELD), and those misfit the shape more than the central ones do (or none is central)."""
+    features = ["rim"] if any(d.ring for d in discs) else []
+    field = np.array([math.hypot(*f.field_position) for f in fits])
+    rms = np.array([s.rms for s in screens])
+    outer, inner = rms[field >= VIGNETTING_MIN_FIELD], rms[field < VIGNETTING_MIN_FIELD]
+    if len(discs) >= 3 and len(outer) and (not len(inner) or np.median(outer) > VIGNETTING_MISFIT_RATIO * np.median(inner)):
+        features.append("vignetting")
+    return tuple(features)
+
+
 def fit_aperture(
     luminance: np.ndarray,
     discs: list[Disc],
@@ -238,6 +432,7 @@ def fit_aperture(
     focus_side: str = "unknown",
     options: FitOptions | None = None,
     progress=None,
+    clipped: np.ndarray | None = None,
 ) -> ApertureFit | FailedFit:
     """Fit one aperture to the discs (see the module notes).
 
@@ -255,6 +450,9 @@ def fit_aperture(
         The budget (most discs fitted) and thresholds; ``FitOptions()`` by default.
     progress : callable, optional
         Called with (done, total) after each disc.
+    clipped : ndarray of shape (M, N), bool, optional
+        Pixels clipped in the source (:attr:`bokehfit.io.Photo.clipped`): fitted
+        as lower bounds, so saturated discs give their outlines.
 
     Returns
     -------
@@ -271,107 +469,160 @@ def fit_aperture(
     options = FitOptions() if options is None else options
     if not isinstance(options, FitOptions):
         raise InputError(f"options must be a FitOptions (got {type(options).__name__})")
+    if clipped is not None and np.shape(clipped) != np.shape(luminance):
+        raise InputError(f"clipped must have the luminance's shape {np.shape(luminance)} (got {np.shape(clipped)})")
     families = families_for(shapes)
     chosen = _order_for_fit(discs, options.max_discs)
     if not chosen:
         flagged = {
-            "saturated": sum(d.saturated for d in discs),
             "cut by the frame": sum(d.clipped for d in discs),
             "overlapping": sum(d.overlaps for d in discs),
             "under 8 px": sum(not d.resolvable for d in discs),
+            "seen only in part": sum(d.evidence not in USABLE_EVIDENCE for d in discs),
         }
         why = ", ".join(f"{n} {what}" for what, n in flagged.items() if n)
         found = f"{len(discs)} found: {why}" if discs else "none found"
         return FailedFit("no_discs", f"no disc is clean enough to fit ({found})", time_s=time.perf_counter() - start)
 
-    screened = [screen(d.outline_xy, families, _slit_aspect(d)) for d in chosen]
-    # Each disc's screens by family (a family is hashable: its aperture).
-    screen_of = [{s.family: s for s in disc_screens} for disc_screens in screened]
-    mean_rms = {f: np.mean([by_family[f].rms for by_family in screen_of]) for f in families}
-    shortlist = sorted(families, key=lambda f: mean_rms[f])[: options.shortlist]
+    crops = [crop_disc(luminance, d, clipped) for d in chosen]
+    # Every family is screened straight and, where it has blades, rounded (design.md §3b): a
+    # rounded 7-gon looks more like a 12-gon than a 7-gon to a straight-only screen.
+    rounded_of = {f: f.rounded for f in families if f.rounded is not None}
+    screen_families = (*families, *rounded_of.values())
+    screened = [screen(d.outline_xy, screen_families, _slit_aspect(d)) for d in chosen]
+    screens_of = [{s.family: s for s in disc_screens} for disc_screens in screened]
+    mean_rms = {f: np.mean([found[f].rms for found in screens_of]) for f in screen_families}
+    best_rms = {f: min(mean_rms[f], mean_rms[rounded_of[f]]) if f in rounded_of else mean_rms[f] for f in families}
+    shortlist = sorted(families, key=lambda f: best_rms[f])[: options.shortlist]
     if FAMILIES[0] in families and FAMILIES[0] not in shortlist:
         shortlist.append(FAMILIES[0])  # the simplest model is always a candidate
+    # Each shortlisted n-gon is fitted straight and with its blades' roundness free: a
+    # straight polygon and the circle are the ends, the BIC says whether the discs need it.
+    candidates = [g for f in shortlist for g in (f, rounded_of.get(f)) if g is not None]
 
     # Model selection on the first model_discs discs, then the winner on all of them.
     model_discs = options.model_discs
     disc_fits = []
-    for i, (disc, disc_screens, by_family) in enumerate(zip(chosen[:model_discs], screened, screen_of)):
-        fits = {f.name: fit_disc_pixels(luminance, disc, f, by_family[f].aperture) for f in shortlist}
+    for i, (disc, crop, disc_screens, found) in enumerate(zip(chosen[:model_discs], crops, screened, screens_of)):
+        fits = {g.name: fit_discs([crop], g, _fit_start(found[g].aperture)).fits[0] for g in candidates}
         disc_fits.append(DiscFit(disc, disc_screens, fits))
         if progress is not None:
             progress(i + 1, len(chosen))
     models = [
-        _combine(
-            family,
-            [item.fits[family.name] for item in disc_fits],
-            [by_family[family] for by_family in screen_of[: len(disc_fits)]],
-        )
-        for family in shortlist
+        _combine(family, [item.fits[family.name] for item in disc_fits], [found[family] for found in screens_of[: len(disc_fits)]])
+        for family in candidates
     ]
-    winner = min(models, key=lambda m: m.bic).family
-    for i, (disc, disc_screens, by_family) in enumerate(
-        zip(chosen[model_discs:], screened[model_discs:], screen_of[model_discs:]), model_discs
+    models.sort(key=lambda m: m.bic)
+    notes = []
+    winner = models[0].family
+    doubt = _elongation_doubt(winner, [item.fits[winner.name] for item in disc_fits])
+    if doubt is not None:
+        others = [m for m in models if "aspect" not in m.family.aperture.parameters]
+        if others:
+            notes.append(f"not {winner.aperture.display_name}: {doubt}")
+            winner = others[0].family
+    for i, (disc, crop, disc_screens, found) in enumerate(
+        zip(chosen[model_discs:], crops[model_discs:], screened[model_discs:], screens_of[model_discs:]), model_discs
     ):
-        fitted = fit_disc_pixels(luminance, disc, winner, by_family[winner].aperture)
+        fitted = fit_discs([crop], winner, _fit_start(found[winner].aperture)).fits[0]
         disc_fits.append(DiscFit(disc, disc_screens, {winner.name: fitted}))
         if progress is not None:
             progress(i + 1, len(chosen))
-    winner_model = _combine(
-        winner,
-        [item.fits[winner.name] for item in disc_fits],
-        [by_family[winner] for by_family in screen_of],
-    )
-    models.sort(key=lambda m: m.bic)
+
+    # Consensus: discs whose shape or angle the others do not share are left out, with the reason.
+    winner_fits = [item.fits[winner.name] for item in disc_fits]
+    winner_screens = [found[winner] for found in screens_of]
+    turned = _turned(winner, winner_fits)
+    outliers = _disagreeing(winner, winner_fits, winner_screens, turned)
+    rejected = {disc_fits[i].disc.index: reason for i, reason in outliers.items()}
+    kept = [i for i in range(len(disc_fits)) if i not in outliers]
+
+    # One aperture for the discs: a joint fit, then the §3b features the discs ask for.
+    joint_ids = kept[:JOINT_DISCS]
+    crops = [dataclasses.replace(crop, turned=t) for crop, t in zip(crops, turned)]
+    joint_crops = [crops[i] for i in joint_ids]
+    noise = [winner_fits[i].noise for i in joint_ids]
+    disc_starts = [crops[i].values_of(winner_fits[i]) for i in joint_ids]
+    aperture = _consensus_start(winner, [winner_fits[i] for i in joint_ids], [turned[i] for i in joint_ids])
+    joint = fit_discs(joint_crops, winner, aperture, noise=noise, disc_starts=disc_starts)
+    feature_tests: dict[str, float] = {}
+    for feature in _feature_tests([winner_fits[i] for i in joint_ids], [chosen[i] for i in joint_ids],
+                                  [winner_screens[i] for i in joint_ids]):
+        trial = fit_discs(joint_crops, winner, _add_feature(joint.aperture, feature, joint.fits), noise=noise,
+                          disc_starts=[crops[i].values_of(f) for i, f in zip(joint_ids, joint.fits)])
+        feature_tests[feature] = joint.bic - trial.bic
+        visible = feature != "rim" or abs(trial.aperture.rim) >= MIN_RIM
+        if feature_tests[feature] >= FEATURE_DELTA_BIC and visible:
+            joint = trial
+    seen_aperture = joint.aperture
+    # The discs left out of the joint fit (beyond JOINT_DISCS) are refitted with the joint aperture fixed.
+    final = dict(zip(joint_ids, joint.fits))
+    for i in kept[JOINT_DISCS:]:
+        final[i] = fit_discs([crops[i]], winner, seen_aperture, free=(), disc_starts=[crops[i].values_of(winner_fits[i])]).fits[0]
+    used_fits = [DiscFit(disc_fits[i].disc, disc_fits[i].screens, {**disc_fits[i].fits, winner.name: final[i]},
+                         own=winner_fits[i], turned=turned[i]) for i in kept]
+
     best_bic = models[0].bic
-    # The winner's entry carries the consensus over every fitted disc (its BIC
-    # stays the selection's, comparable with the others'): one angle, one size.
+    winner_model = _combine(winner, [final[i] for i in kept], [winner_screens[i] for i in kept])
     models = [
         dataclasses.replace(winner_model if m.family is winner else m, bic=m.bic, delta_bic=m.bic - best_bic)
         for m in models
     ]
-    margin = models[1].delta_bic if len(models) > 1 else math.inf
+    models.sort(key=lambda m: (m.family is not winner, m.bic))
+    # The runner-up is the best other shape (the winner straight or rounded is the same shape: its
+    # roundness and that value's uncertainty say how round the blades are).
+    runner_up = next((m for m in models[1:] if m.family.base != winner.base), None)
+    margin = runner_up.bic - models[0].bic if runner_up is not None else math.inf
     selection_discs = min(len(disc_fits), model_discs)
     # Unsure only where the runner-up fits about as well; a nested model that
     # fits no better (a slit of aspect 1 against the square) loses by its penalty alone.
-    runner_up_rss = sum(item.fits[models[1].family.name].rss for item in disc_fits[:selection_discs]) if len(models) > 1 else math.inf
+    runner_up_rss = (sum(item.fits[runner_up.family.name].rss for item in disc_fits[:selection_discs])
+                     if runner_up is not None else math.inf)
     best_rss = sum(item.fits[winner.name].rss for item in disc_fits[:selection_discs])
-    sure = margin >= options.sure_delta_bic_per_disc * selection_discs or runner_up_rss >= best_rss
-    best = winner_model
-    best_fits = [item.fits[best.family.name] for item in disc_fits]
+    sure = (margin >= options.sure_delta_bic_per_disc * selection_discs or runner_up_rss >= best_rss) and not notes
+    best_fits = [final[i] for i in kept]
     diameters = np.array([f.diameter_px for f in best_fits])
     # The median's uncertainty: the spread between discs (over √n) with each fit's own.
     spread = 1.4826 * float(np.median(np.abs(diameters - np.median(diameters)))) / math.sqrt(len(diameters))
     own = float(np.median([f.uncertainty.get("diameter_px", 0.0) for f in best_fits]))
     spread = math.hypot(spread, own if math.isfinite(own) else 0.0)
-    # The aperture's other parameters (the slit's aspect): the median over the discs.
-    others = {
-        name: float(np.median([f.aperture.values[name] for f in best_fits]))
-        for name, parameter in best.family.aperture.parameters.items()
-        if parameter.periodic is None
-    }
-    seen = best.angle_deg if best.angle_deg is not None else 0.0
-    aperture_angle = seen + 180.0 if focus_side == "near" else seen
-    aperture = best.family.at(angle_deg=aperture_angle, **others)
-    described = best.family.name + ("" if aperture.aspect is None else f" (aspect {aperture.aspect:.2f})")
+    angle_uncertainty = winner_model.angle_uncertainty_deg
+    if angle_uncertainty is not None and math.isfinite(joint.uncertainty.get("angle_deg", math.nan)):
+        angle_uncertainty = math.hypot(angle_uncertainty, joint.uncertainty["angle_deg"])
+    aperture = seen_aperture.near() if focus_side == "near" else seen_aperture
+    seen_angle = seen_aperture.canonical_angle_deg
+    edges = sum(chosen[i].evidence == "edge" for i in kept)
+    described = aperture.display_name + ("" if aperture.aspect is None else f" (aspect {aperture.aspect:.2f})")
     if aperture.has_angle:
         described += f" at {aperture.canonical_angle_deg:.2f}°"
+    features = [f"{name} (ΔBIC {gain:.0f})" for name, gain in feature_tests.items() if name in seen_aperture.enabled_features]
     message = (
-        f"{described} from {len(disc_fits)} discs; "
-        + (f"ΔBIC {margin:.0f} over {models[1].family.name}" if len(models) > 1 else "one model tried")
-        + ("" if sure else " (unsure: the runner-up is close)")
+        f"{described} from {len(kept)} discs"
+        + (f" ({edges} by their edges: saturated or ringed)" if edges else "")
+        + (f", {len(rejected)} left out as disagreeing" if rejected else "")
+        + "; "
+        + (f"ΔBIC {margin:.0f} over {runner_up.family.name}" if runner_up is not None else "one model tried")
+        + (f"; with {', '.join(features)}" if features else "")
+        + "".join(f"; {note}" for note in notes)
+        + ("" if sure or notes else " (unsure: the runner-up is close)")
     )
     return ApertureFit(
         message=message,
         aperture=aperture,
-        seen_angle_deg=best.angle_deg,
-        angle_uncertainty_deg=best.angle_uncertainty_deg,
-        diameter_px=best.diameter_px,
+        seen_angle_deg=seen_angle,
+        angle_uncertainty_deg=angle_uncertainty,
+        diameter_px=float(np.median(diameters)),
         diameter_uncertainty_px=spread,
         blur_px=float(np.median([f.blur_px for f in best_fits])),
         focus_side=focus_side,
         candidates=models,
-        disc_fits=disc_fits,
+        disc_fits=used_fits,
         sure=sure,
         options=options,
         time_s=time.perf_counter() - start,
+        seen_aperture=seen_aperture,
+        rejected=rejected,
+        feature_tests=feature_tests,
+        feature_uncertainty=dict(joint.uncertainty),
+        notes=tuple(notes),
     )

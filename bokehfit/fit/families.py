@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 from bokehfit.apertures import SHAPES, Aperture, make_aperture
@@ -28,7 +29,23 @@ class Family:
 
     @property
     def name(self) -> str:
-        return self.aperture.label
+        """The shape's label, then each feature the family varies: ``ngon(7)``, ``ngon(7)+roundness``."""
+        return "+".join((self.aperture.label, *self.aperture.enabled_features))
+
+    @property
+    def base(self) -> Family:
+        """The family of the same shape with no feature varied (a rounded 7-gon's is the straight 7-gon's)."""
+        if not self.aperture.features:
+            return self
+        return Family(dataclasses.replace(self.aperture, features=frozenset(), roundness=0.0))
+
+    @property
+    def rounded(self) -> Family | None:
+        """The same shape with its blades' roundness fitted too (None where the shape has no blades to round)."""
+        aperture = self.aperture
+        if not aperture.spec.rounds or "roundness" in aperture.enabled_features:
+            return None
+        return Family(aperture.with_features("roundness"))
 
     @property
     def parameters(self) -> int:

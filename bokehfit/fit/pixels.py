@@ -1,4 +1,4 @@
-"""Fit one disc's pixels with a kernel: shape, angle, size, centre, levels and edge blur.
+"""Fit discs' pixels with a kernel: shape, angle, size, centre, levels, edge blur and the lens's features.
 
 Notes
 -----
@@ -6,22 +6,40 @@ The model of a disc's crop is
 
     I(x) = b + (p − b) · (G_σ ⊗ K)(x),
 
-with K the exact pixel coverage of the aperture (``bokehfit.kernels.exact``)
-at centre c and equal-area diameter d, and G_σ a Gaussian edge blur
-(sensor, demosaicing, JPEG). Least squares (trust-region reflective, bounded)
-fits c, d, σ and the aperture's own :attr:`~bokehfit.apertures.Aperture.parameters`
-(the angle, the slit's aspect), solving for b and p at every step
-(they enter linearly: variable projection); the starting point comes from
-the disc's outline and the radial-signature screen. Crops wider than
-``MAX_FIT_SIDE`` px are reduced by an integer factor first (area averaging),
-which keeps the cost per disc bounded and loses nothing the shape needs.
-Uncertainties are from the Jacobian at the optimum: cov = (JᵀJ)⁻¹ · RSS / (n − k).
+with K the light of the aperture on each pixel (``bokehfit.kernels.exact``:
+exact coverage, weighted by the ``rim`` profile where the aperture has one,
+clipped by the ``vignetting`` at the disc's place in the frame) at centre c
+and equal-area diameter d, and G_σ a Gaussian edge blur (sensor,
+demosaicing, JPEG). Least squares (trust-region reflective, bounded) fits c,
+d, σ and the aperture's own :attr:`~bokehfit.apertures.Aperture.parameters`
+(the angle, the slit's aspect, the roundness, ...), solving for b and p at
+every step (they enter linearly: variable projection).
+
+**Clipped pixels are censored, not lost.** A pixel clipped in the source (any
+channel at the file's top value) says only that the light there was at least
+what was recorded, so its residual is min(model − data, 0): the model may pass
+above it, never below. A saturated disc's plateau p is then unknown above the
+clip and becomes a fitted parameter; its outline still fixes the shape.
+
+**Many discs, one aperture.** :func:`fit_discs` fits several discs at once:
+each disc its own centre, size, blur and levels, all of them the shared
+aperture parameters (and the vignetting, which only the discs' spread over the
+frame can tell). The Jacobian is block-sparse (a disc's residuals depend on
+its own parameters and the shared ones), so finite differences cost a few
+renders of every disc, not one per parameter. Each disc's residuals are
+divided by its own noise level (from its single-disc fit), so a bright disc
+does not outvote the others.
+
+Crops wider than ``MAX_FIT_SIDE`` px are reduced by an integer factor first
+(area averaging), which keeps the cost per disc bounded and loses nothing the
+shape needs. Uncertainties are from the Jacobian at the optimum:
+cov = (JᵀJ)⁻¹ · RSS / (n − k).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import cv2
@@ -31,9 +49,21 @@ from scipy.optimize import least_squares
 from bokehfit.apertures import Aperture, ParameterSpec, image_to_aperture
 from bokehfit.discs import Disc
 from bokehfit.fit.families import Family
-from bokehfit.kernels.exact import coverage
+from bokehfit.kernels.exact import coverage, rim_coverage
 
-__all__ = ["PixelFit", "disc_profile", "fit_disc_pixels", "model_window", "render_disc_model", "MAX_FIT_SIDE"]
+__all__ = [
+    "DiscCrop",
+    "JointFit",
+    "PixelFit",
+    "crop_disc",
+    "disc_profile",
+    "field_position",
+    "fit_disc_pixels",
+    "fit_discs",
+    "model_window",
+    "render_disc_model",
+    "MAX_FIT_SIDE",
+]
 
 #: Largest crop side fitted at full resolution; larger discs are reduced first.
 MAX_FIT_SIDE = 36
@@ -46,9 +76,115 @@ BLUR_RANGE = (0.05, 6.0)
 #: The parameters of every disc, first in the fit's vector (crop units; the centre in crop pixel coordinates).
 DISC_NAMES = ("cx", "cy", "diameter_px", "blur_px")
 #: Fit bounds narrower than :attr:`ParameterSpec.bounds`, by parameter name.
-FIT_BOUNDS = {"aspect": (0.01, MAX_SLIT_ASPECT)}
+FIT_BOUNDS = {"aspect": (0.01, MAX_SLIT_ASPECT), "vignetting_radius": (1.0, 4.0), "vignetting_shift": (-4.0, 4.0)}
 #: Parameters searched within a factor of 2 of their start (scale factors, not offsets).
 RELATIVE_PARAMETERS = ("aspect", "squeeze")
+#: Sub-pixels a side for the rim profile in the fit (the edge blur hides finer detail).
+RIM_FIT_SUPERSAMPLE = 3
+#: A saturated disc's plateau is searched up to this many times the clip level.
+MAX_PLATEAU_OVER_CLIP = 50.0
+
+
+@dataclass(frozen=True)
+class DiscCrop:
+    """The pixels of one disc that the fit sees: a square crop, maybe reduced, with its censored pixels."""
+
+    disc: Disc
+    data: np.ndarray  #: flattened crop, float64
+    censored: np.ndarray | None  #: flattened: True where the source is clipped (a lower bound); None if none is
+    size: int
+    factor: int
+    corner: tuple[int, int]  #: full-resolution (left, top) of the crop
+    field_position: tuple[float, float]  #: the disc's centre from the image centre, half-diagonals, y up
+    turned: bool = False  #: the disc shows the aperture turned by 180° (:meth:`Aperture.near`) from the others
+
+    @property
+    def start(self) -> dict[str, float]:
+        """The disc's :data:`DISC_NAMES` in crop units from its outline, a one-pixel blur."""
+        left, top = self.corner
+        return {
+            "cx": (self.disc.center_xy[0] - left + 0.5) / self.factor - 0.5,
+            "cy": (self.disc.center_xy[1] - top + 0.5) / self.factor - 0.5,
+            "diameter_px": self.disc.diameter_px / self.factor,
+            "blur_px": 0.7,
+        }
+
+    @property
+    def clip_level(self) -> float | None:
+        """The largest recorded value among the censored pixels (None when none is censored)."""
+        return None if self.censored is None else float(np.max(self.data[self.censored]))
+
+    def values_of(self, fit: PixelFit) -> dict[str, float]:
+        """A fit's disc values in this crop's units (a start for another fit of the same disc)."""
+        left, top = self.corner
+        f = self.factor
+        values = {
+            "cx": (fit.center_xy[0] - left + 0.5) / f - 0.5,
+            "cy": (fit.center_xy[1] - top + 0.5) / f - 0.5,
+            "diameter_px": fit.diameter_px / f,
+            "blur_px": math.sqrt(fit.blur_px**2 + (f * f - 1) / 12.0) / f,
+        }
+        if self.censored is not None:
+            values["plateau"] = fit.plateau
+        return values
+
+    def to_full(self, values: Mapping[str, float]) -> tuple[tuple[float, float], float, float]:
+        """Crop-unit disc values → full-resolution centre (x, y), diameter and blur."""
+        left, top = self.corner
+        f = self.factor
+        centre = (left + (values["cx"] + 0.5) * f - 0.5, top + (values["cy"] + 0.5) * f - 0.5)
+        # The area-averaging reduction adds a box blur of variance (f² − 1)/12 px².
+        blur = math.sqrt(max((values["blur_px"] * f) ** 2 - (f * f - 1) / 12.0, 0.0))
+        return centre, values["diameter_px"] * f, blur
+
+
+def field_position(center_xy: Sequence[float], shape: tuple[int, int]) -> tuple[float, float]:
+    """A point's field position q (design.md §3b): from the image centre, in half-diagonals, y up."""
+    height, width = shape
+    half_diagonal = 0.5 * math.hypot(width, height)
+    x = (center_xy[0] - (width - 1) / 2.0) / half_diagonal
+    y = -(center_xy[1] - (height - 1) / 2.0) / half_diagonal
+    return (x, y)
+
+
+def crop_disc(luminance: np.ndarray, disc: Disc, clipped: np.ndarray | None = None) -> DiscCrop:
+    """Square crop around the disc (reduced if wide), with the clipped pixels of ``clipped`` censored."""
+    reach = float(np.max(np.hypot(*(disc.outline_xy - disc.center_xy).T)))
+    half = int(math.ceil(reach * 1.25 + 3))
+    factor = max(1, int(math.ceil((2 * half + 1) / MAX_FIT_SIDE)))
+    half = int(math.ceil((half + 1) / factor)) * factor  # a whole number of reduced pixels
+    col, row = int(round(disc.center_xy[0])), int(round(disc.center_xy[1]))
+    height, width = luminance.shape
+    top, left = row - half, col - half
+    side = 2 * half
+
+    def window(image: np.ndarray) -> np.ndarray:
+        if top < 0 or left < 0 or top + side > height or left + side > width:
+            pad = ((max(0, -top), max(0, top + side - height)), (max(0, -left), max(0, left + side - width)))
+            return np.pad(image[max(0, top) : top + side, max(0, left) : left + side], pad, mode="edge")
+        return image[top : top + side, left : left + side]
+
+    crop = window(luminance).astype(np.float32)
+    censored = None
+    if clipped is not None:
+        mask = window(clipped).astype(np.float32)
+        if factor > 1:
+            mask = cv2.resize(mask, (side // factor, side // factor), interpolation=cv2.INTER_AREA)
+        # A reduced pixel with any clipped source pixel in it is a lower bound too.
+        censored = mask.ravel() > 0.0
+        if not censored.any():
+            censored = None
+    if factor > 1:
+        crop = cv2.resize(crop, (side // factor, side // factor), interpolation=cv2.INTER_AREA)
+    return DiscCrop(
+        disc=disc,
+        data=crop.ravel().astype(np.float64),
+        censored=censored,
+        size=side // factor,
+        factor=factor,
+        corner=(left, top),
+        field_position=field_position(disc.center_xy, luminance.shape),
+    )
 
 
 @dataclass(frozen=True)
@@ -67,6 +203,8 @@ class PixelFit:
     uncertainty: dict  #: one standard deviation of each parameter (full-resolution units)
     evaluations: int
     success: bool
+    censored: int = 0  #: pixels fitted as lower bounds (clipped in the source)
+    field_position: tuple[float, float] | None = None  #: where the disc lies in the frame (design.md §3b)
 
     @property
     def angle_deg(self) -> float | None:
@@ -79,39 +217,37 @@ class PixelFit:
         return self.aperture.aspect
 
     @property
+    def parameter_count(self) -> int:
+        """Parameters counted for the BIC: the family's, and the features switched on beyond them (roundness, rim, ...)."""
+        return self.family.parameters + len(self.aperture.parameters) - len(self.family.aperture.parameters)
+
+    @property
+    def noise(self) -> float:
+        """The residuals' RMS: the disc's noise level under this model."""
+        return math.sqrt(max(self.rss, 1e-300) / self.pixels)
+
+    @property
     def bic(self) -> float:
         """Bayesian information criterion: n·ln(RSS/n) + k·ln(n)."""
         n = self.pixels
-        return n * math.log(max(self.rss, 1e-300) / n) + self.family.parameters * math.log(n)
+        return n * math.log(max(self.rss, 1e-300) / n) + self.parameter_count * math.log(n)
 
 
-def _crop(luminance: np.ndarray, disc: Disc):
-    """Square crop around the disc (reduced if wide): image, its factor, and its top-left corner."""
-    reach = float(np.max(np.hypot(*(disc.outline_xy - disc.center_xy).T)))
-    half = int(math.ceil(reach * 1.25 + 3))
-    factor = max(1, int(math.ceil((2 * half + 1) / MAX_FIT_SIDE)))
-    half = int(math.ceil((half + 1) / factor)) * factor  # a whole number of reduced pixels
-    col, row = int(round(disc.center_xy[0])), int(round(disc.center_xy[1]))
-    height, width = luminance.shape
-    top, left = row - half, col - half
-    side = 2 * half
-    if top < 0 or left < 0 or top + side > height or left + side > width:
-        pad = ((max(0, -top), max(0, top + side - height)), (max(0, -left), max(0, left + side - width)))
-        crop = np.pad(luminance[max(0, top) : top + side, max(0, left) : left + side], pad, mode="edge")
-    else:
-        crop = luminance[top : top + side, left : left + side]
-    if factor > 1:
-        crop = cv2.resize(crop, (side // factor, side // factor), interpolation=cv2.INTER_AREA)
-    return np.ascontiguousarray(crop, dtype=np.float32), factor, (left, top)
-
-
-def disc_profile(aperture: Aperture, disc: Mapping[str, float], size: int) -> np.ndarray:
+def disc_profile(
+    aperture: Aperture, disc: Mapping[str, float], size: int, field_position: Sequence[float] | None = None
+) -> np.ndarray:
     """The blurred unit-contrast disc (size × size) of ``aperture``; ``disc`` holds the :data:`DISC_NAMES`
-    in crop units, the centre in crop pixel coordinates."""
+    in crop units, the centre in crop pixel coordinates. ``field_position`` places a vignetted aperture."""
     centre = (size - 1) / 2.0
     scale = max(disc["diameter_px"], 1e-3) * math.sqrt(math.pi) / 2.0
     (offset_xy,) = image_to_aperture([[disc["cy"] - centre, disc["cx"] - centre]])
-    cover = coverage(aperture, scale, size, offset_xy=tuple(offset_xy)).astype(np.float32)
+    where = None if aperture.vignetting is None else field_position
+    if aperture.rim != 0.0:
+        cover, _ = rim_coverage(aperture, scale, size, field_position=where, supersample=RIM_FIT_SUPERSAMPLE,
+                                max_chord_error=1e-4, offset_xy=tuple(offset_xy))
+    else:
+        cover = coverage(aperture, scale, size, offset_xy=tuple(offset_xy), field_position=where)
+    cover = cover.astype(np.float32)
     return cv2.GaussianBlur(cover, (0, 0), max(disc["blur_px"], BLUR_RANGE[0]), borderType=cv2.BORDER_REPLICATE)
 
 
@@ -131,13 +267,6 @@ def _search_bounds(parameter: ParameterSpec, start: float) -> tuple[float, float
     return start, low, high
 
 
-def _split(aperture: Aperture, names: tuple[str, ...], vector: np.ndarray) -> tuple[Aperture, dict[str, float]]:
-    """The fit's vector, named: the aperture with its parameters set, and the disc's :data:`DISC_NAMES` values."""
-    values = dict(zip(names, (float(v) for v in vector)))
-    disc = {name: values.pop(name) for name in DISC_NAMES}
-    return (aperture.replace(**values) if values else aperture), disc
-
-
 def _levels(profile: np.ndarray, data: np.ndarray) -> tuple[float, float]:
     """Background and plateau that fit ``data`` best for this profile (2×2 linear least squares)."""
     ones = 1.0 - profile
@@ -149,49 +278,152 @@ def _levels(profile: np.ndarray, data: np.ndarray) -> tuple[float, float]:
     return (a22 * r1 - a12 * r2) / det, (a11 * r2 - a12 * r1) / det
 
 
+def _background(profile: np.ndarray, data: np.ndarray, plateau: float) -> float:
+    """The background that fits ``data`` best for this profile and a given plateau."""
+    ones = 1.0 - profile
+    weight = float(ones @ ones)
+    return float(ones @ (data - plateau * profile)) / weight if weight > 1e-12 else float(data.min())
+
+
 def render_disc_model(
-    aperture: Aperture, disc: Mapping[str, float], size: int, data: np.ndarray
+    aperture: Aperture,
+    disc: Mapping[str, float],
+    size: int,
+    data: np.ndarray,
+    field_position: Sequence[float] | None = None,
+    censored: np.ndarray | None = None,
 ) -> tuple[np.ndarray, float, float]:
-    """Model crop (flattened) with its best levels for ``data``: (model, background, plateau)."""
-    profile = disc_profile(aperture, disc, size).ravel().astype(np.float64)
-    background, plateau = _levels(profile, data)
+    """Model crop (flattened) with its levels for ``data``: (model, background, plateau).
+
+    The levels are solved for (least squares over the pixels not censored);
+    a ``disc`` that holds ``"plateau"`` (a saturated disc) fixes the plateau
+    and only the background is solved for.
+    """
+    profile = disc_profile(aperture, disc, size, field_position).ravel().astype(np.float64)
+    seen = slice(None) if censored is None else ~censored
+    if "plateau" in disc:
+        plateau = disc["plateau"]
+        background = _background(profile[seen], data[seen], plateau)
+    else:
+        background, plateau = _levels(profile[seen], data[seen])
     return background + (plateau - background) * profile, background, plateau
 
 
-def fit_disc_pixels(
-    luminance: np.ndarray,
-    disc: Disc,
-    family: Family,
-    start: Aperture,
-) -> PixelFit:
-    """Least-squares fit of ``family`` to the disc's pixels, starting at the aperture ``start`` (the screen's).
+def _residuals(model: np.ndarray, crop: DiscCrop) -> np.ndarray:
+    """model − data; where the source is clipped only a model below the recorded value is an error."""
+    residual = model - crop.data
+    if crop.censored is not None:
+        residual[crop.censored] = np.minimum(residual[crop.censored], 0.0)
+    return residual
 
-    The vector fitted is the disc's :data:`DISC_NAMES`, then ``start``'s
-    :attr:`~bokehfit.apertures.Aperture.parameters` by name (bounds from
-    :func:`_search_bounds`); the fitted aperture keeps its angle in [0, symmetry).
-    """
-    crop, factor, (left, top) = _crop(luminance, disc)
-    size = crop.shape[0]
-    # Start: the outline's centre and size, a one-pixel blur. The background and
-    # plateau enter linearly and are solved for at every step (variable projection).
-    cx0 = (disc.center_xy[0] - left + 0.5) / factor - 0.5
-    cy0 = (disc.center_xy[1] - top + 0.5) / factor - 0.5
-    diameter0 = disc.diameter_px / factor
-    x0 = [cx0, cy0, diameter0, 0.7]
-    lower = [cx0 - 3, cy0 - 3, 0.5 * diameter0, BLUR_RANGE[0]]
-    upper = [cx0 + 3, cy0 + 3, 1.5 * diameter0, BLUR_RANGE[1]]
+
+def _disc_vector(crop: DiscCrop) -> tuple[list[str], list[float], list[float], list[float]]:
+    """One disc's names, start, lower and upper bounds (crop units)."""
+    start = crop.start
+    names = list(DISC_NAMES)
+    x0 = [start[n] for n in DISC_NAMES]
+    lower = [start["cx"] - 3, start["cy"] - 3, 0.5 * start["diameter_px"], BLUR_RANGE[0]]
+    upper = [start["cx"] + 3, start["cy"] + 3, 1.5 * start["diameter_px"], BLUR_RANGE[1]]
+    clip = crop.clip_level
+    if clip is not None:  # a saturated disc: its plateau is somewhere above the clip
+        names.append("plateau")
+        x0.append(max(crop.disc.plateau, clip) * 1.5)
+        lower.append(clip)
+        upper.append(clip * MAX_PLATEAU_OVER_CLIP)
+    return names, x0, lower, upper
+
+
+def _shared_vector(start: Aperture, free: Sequence[str]) -> tuple[list[float], list[float], list[float]]:
     parameters = start.parameters
-    for name, value in start.values.items():
-        first, low, high = _search_bounds(parameters[name], value)
+    values = start.values
+    x0, lower, upper = [], [], []
+    for name in free:
+        first, low, high = _search_bounds(parameters[name], values[name])
         x0.append(first)
         lower.append(low)
         upper.append(high)
-    names = DISC_NAMES + tuple(start.values)
-    data = crop.ravel().astype(np.float64)
+    return x0, lower, upper
+
+
+def _wrapped(aperture: Aperture, values: Mapping[str, float]) -> Aperture:
+    """``aperture`` with ``values`` set, periodic ones (the angle) reduced to [0, period)."""
+    parameters = aperture.parameters
+    wrapped = {n: (v % parameters[n].periodic if parameters[n].periodic is not None else v) for n, v in values.items()}
+    return aperture.replace(**wrapped) if wrapped else aperture
+
+
+@dataclass(frozen=True)
+class JointFit:
+    """Several discs fitted with one aperture: the aperture, each disc's fit, and the evidence."""
+
+    aperture: Aperture
+    fits: list[PixelFit]
+    uncertainty: dict  #: one standard deviation of each shared parameter
+    rss: float  #: weighted: each disc's residuals over its noise level
+    pixels: int
+    parameters: int
+    evaluations: int
+
+    @property
+    def bic(self) -> float:
+        n = self.pixels
+        return n * math.log(max(self.rss, 1e-300) / n) + self.parameters * math.log(n)
+
+
+def fit_discs(
+    crops: Sequence[DiscCrop],
+    family: Family,
+    start: Aperture,
+    free: Sequence[str] | None = None,
+    noise: Sequence[float] | None = None,
+    disc_starts: Sequence[Mapping[str, float]] | None = None,
+) -> JointFit:
+    """Least-squares fit of ``crops`` sharing one aperture.
+
+    The vector fitted is the shared aperture parameters ``free`` (default: all
+    of ``start``'s :attr:`~bokehfit.apertures.Aperture.parameters`), then each
+    disc's :data:`DISC_NAMES` (and plateau where it is saturated). ``noise``
+    (one per crop, default 1) divides each disc's residuals. ``disc_starts``
+    (crop units) replace the outline's starting values where given.
+    """
+    free = tuple(start.parameters) if free is None else tuple(free)
+    noise = np.ones(len(crops)) if noise is None else np.maximum(np.asarray(noise, dtype=np.float64), 1e-12)
+    x0, lower, upper = _shared_vector(start, free)
+    blocks = []
+    for i, crop in enumerate(crops):
+        names, d0, dlow, dhigh = _disc_vector(crop)
+        if disc_starts is not None and disc_starts[i] is not None:
+            d0 = [min(max(disc_starts[i].get(n, v), lo), hi) for n, v, lo, hi in zip(names, d0, dlow, dhigh)]
+        blocks.append((len(x0), names))
+        x0 += d0
+        lower += dlow
+        upper += dhigh
+    shared = len(free)
+
+    def split(vector):
+        aperture = start.replace(**dict(zip(free, (float(v) for v in vector[:shared])))) if shared else start
+        discs = [dict(zip(names, (float(v) for v in vector[at : at + len(names)]))) for at, names in blocks]
+        return aperture, discs
 
     def residuals(vector):
-        return render_disc_model(*_split(start, names, vector), size, data)[0] - data
+        aperture, discs = split(vector)
+        turned = aperture.near() if any(c.turned for c in crops) else aperture
+        parts = [
+            _residuals(render_disc_model(turned if c.turned else aperture, d, c.size, c.data, c.field_position,
+                                         c.censored)[0], c) / s
+            for c, d, s in zip(crops, discs, noise)
+        ]
+        return np.concatenate(parts)
 
+    rows = [c.data.size for c in crops]
+    sparsity = None
+    if len(crops) > 1:
+        sparsity = np.zeros((sum(rows), len(x0)), dtype=bool)
+        row = 0
+        for (at, names), count in zip(blocks, rows):
+            sparsity[row : row + count, :shared] = True
+            sparsity[row : row + count, at : at + len(names)] = True
+            row += count
     result = least_squares(
         residuals,
         np.array(x0, dtype=np.float64),
@@ -200,45 +432,79 @@ def fit_disc_pixels(
         x_scale="jac",
         max_nfev=MAX_EVALUATIONS,
         diff_step=1e-4,
+        jac_sparsity=sparsity,
+        tr_solver="exact" if sparsity is None else "lsmr",
     )
-    _, found = _split(start, names, result.x)
-    fitted = {name: float(value) for name, value in zip(names[len(DISC_NAMES):], result.x[len(DISC_NAMES):])}
-    for name, value in fitted.items():
-        if parameters[name].periodic is not None:
-            fitted[name] = value % parameters[name].periodic
-    aperture = start.replace(**fitted) if fitted else start
-    _, background, plateau = render_disc_model(aperture, found, size, data)
-    rss = float(np.sum(result.fun**2))
-    n, k = data.size, len(names) + 2
-    sigma = np.full(len(names), np.nan)
+    _, discs = split(result.x)
+    aperture = _wrapped(start, {name: float(v) for name, v in zip(free, result.x[:shared])})
+    jacobian = result.jac.toarray() if hasattr(result.jac, "toarray") else result.jac
+    # The levels solved for at every step count too: two per disc, one where the plateau is fitted.
+    n, k = len(result.fun), len(x0) + sum(1 if "plateau" in names else 2 for _, names in blocks)
+    total = float(np.sum(result.fun**2))
+    sigma = np.full(len(x0), np.nan)
     try:
-        covariance = np.linalg.inv(result.jac.T @ result.jac) * rss / max(n - k, 1)
+        covariance = np.linalg.pinv(jacobian.T @ jacobian) * total / max(n - k, 1)
         sigma = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
     except np.linalg.LinAlgError:
         pass
-    in_full = {"cx": factor, "cy": factor, "diameter_px": factor, "blur_px": factor}
-    uncertainty = {name: float(s * in_full.get(name, 1.0)) for name, s in zip(names, sigma)}
-    # The area-averaging reduction adds a box blur of variance (factor² − 1)/12 px².
-    blur = math.sqrt(max((found["blur_px"] * factor) ** 2 - (factor * factor - 1) / 12.0, 0.0))
-    return PixelFit(
-        family=family,
+    fits, row = [], 0
+    for crop, values, (at, names), count, scale in zip(crops, discs, blocks, rows, noise):
+        shown = aperture.near() if crop.turned else aperture
+        model, background, plateau = render_disc_model(shown, values, crop.size, crop.data, crop.field_position,
+                                                       crop.censored)
+        rss = float(np.sum(_residuals(model, crop) ** 2))
+        centre, diameter, blur = crop.to_full(values)
+        in_full = {"cx": crop.factor, "cy": crop.factor, "diameter_px": crop.factor, "blur_px": crop.factor}
+        uncertainty = {name: float(s * in_full.get(name, 1.0)) for name, s in zip(names, sigma[at : at + len(names)])}
+        uncertainty.update({name: float(s) for name, s in zip(free, sigma[:shared])})
+        fits.append(PixelFit(
+            family=family,
+            aperture=shown,
+            center_xy=centre,
+            diameter_px=diameter,
+            plateau=float(plateau),
+            background=float(background),
+            blur_px=blur,
+            rss=rss,
+            pixels=crop.data.size,
+            uncertainty=uncertainty,
+            evaluations=int(result.nfev),
+            success=bool(result.success),
+            censored=0 if crop.censored is None else int(crop.censored.sum()),
+            field_position=crop.field_position,
+        ))
+        row += count
+    return JointFit(
         aperture=aperture,
-        center_xy=(left + (found["cx"] + 0.5) * factor - 0.5, top + (found["cy"] + 0.5) * factor - 0.5),
-        diameter_px=found["diameter_px"] * factor,
-        plateau=float(plateau),
-        background=float(background),
-        blur_px=blur,
-        rss=rss,
+        fits=fits,
+        uncertainty={name: float(s) for name, s in zip(free, sigma[:shared])},
+        rss=total,
         pixels=n,
-        uncertainty=uncertainty,
+        parameters=k,
         evaluations=int(result.nfev),
-        success=bool(result.success),
     )
+
+
+def fit_disc_pixels(
+    luminance: np.ndarray,
+    disc: Disc,
+    family: Family,
+    start: Aperture,
+    clipped: np.ndarray | None = None,
+) -> PixelFit:
+    """Least-squares fit of ``family`` to one disc's pixels, starting at the aperture ``start`` (the screen's).
+
+    The vector fitted is the disc's :data:`DISC_NAMES` (and its plateau where
+    ``clipped`` marks some of its pixels), then ``start``'s
+    :attr:`~bokehfit.apertures.Aperture.parameters` by name (bounds from
+    :func:`_search_bounds`); the fitted aperture keeps its angle in [0, symmetry).
+    """
+    return fit_discs([crop_disc(luminance, disc, clipped)], family, start).fits[0]
 
 
 def model_window(fit: PixelFit, left: int, top: int, size: int) -> np.ndarray:
     """The fitted model of a disc on a full-resolution window (size × size, top-left at (left, top))."""
     disc = {"cx": fit.center_xy[0] - left, "cy": fit.center_xy[1] - top, "diameter_px": fit.diameter_px,
             "blur_px": fit.blur_px}
-    profile = disc_profile(fit.aperture, disc, size)
+    profile = disc_profile(fit.aperture, disc, size, fit.field_position)
     return (fit.background + (fit.plateau - fit.background) * profile).astype(np.float32)

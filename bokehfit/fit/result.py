@@ -59,17 +59,22 @@ class FitOptions:
 
 @dataclass(frozen=True)
 class Parameter:
-    """One fitted quantity: its value and its standard uncertainty (None where not estimated)."""
+    """One fitted quantity: its value and its standard uncertainty (None where not estimated).
+
+    A feature with members (``vignetting``) has a dict of values and a dict of uncertainties.
+    """
 
     name: str
-    value: float | None
-    uncertainty: float | None = None
+    value: float | dict | None
+    uncertainty: float | dict | None = None
 
     def to_json(self, digits: int = 3) -> dict:
         return {"value": _round(self.value, digits), "uncertainty": _round(self.uncertainty, digits)}
 
 
 def _round(value, digits: int):
+    if isinstance(value, dict):  # a feature with members (vignetting: radius and shift)
+        return {key: _round(member, digits) for key, member in value.items()}
     if value is None or not math.isfinite(value):
         return None
     return round(float(value), digits)
@@ -119,6 +124,12 @@ class FailedFit:
     def disc_fit(self, disc):
         """No disc was fitted."""
         return None
+
+    def disc_item(self, disc):
+        """No disc was fitted."""
+        return None
+
+    rejected: dict = field(default_factory=dict)  #: no disc was set aside by a consensus
 
     def to_json(self) -> dict:
         return {"status": self.status, "reason": self.reason, "candidates": []}

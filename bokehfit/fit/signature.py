@@ -25,6 +25,8 @@ __all__ = ["SAMPLES", "Screen", "radial_signature", "screen"]
 #: Angles of the radial signature (0.5° apart).
 SAMPLES = 720
 _THETA = np.arange(SAMPLES) * (2.0 * np.pi / SAMPLES)
+#: Roundness values a rounded family is screened at (the pixel fit refines from the best).
+ROUNDNESS_GRID = (0.0, 0.2, 0.4, 0.6, 0.8)
 
 
 @dataclass(frozen=True)
@@ -57,20 +59,8 @@ def radial_signature(outline_xy: np.ndarray) -> np.ndarray:
 
 
 def _model_signature(aperture: Aperture) -> np.ndarray:
-    """r(θ) / r_eq of the unit-area aperture at angle 0: each ray meets the boundary once."""
-    if aperture.is_circle:
-        return np.ones(SAMPLES)
-    vertices = aperture.vertices()
-    r_eq = 1.0 / np.sqrt(np.pi)
-    a, b = vertices, np.roll(vertices, -1, axis=0)
-    d = np.stack([np.cos(_THETA), np.sin(_THETA)], axis=-1)[:, None, :]  # (S, 1, 2)
-    e = (b - a)[None]  # (1, K, 2)
-    denominator = d[..., 0] * e[..., 1] - d[..., 1] * e[..., 0]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = (a[None, :, 0] * e[..., 1] - a[None, :, 1] * e[..., 0]) / denominator  # distance along the ray
-        s = (a[None, :, 0] * d[..., 1] - a[None, :, 1] * d[..., 0]) / denominator  # position along the edge
-    hit = (s >= -1e-9) & (s <= 1 + 1e-9) & (t > 0)
-    return np.where(hit, t, np.inf).min(axis=1) / r_eq
+    """r(θ) / r_eq of the unit-area aperture at angle 0 (:meth:`Aperture.outline_radius`)."""
+    return aperture.outline_radius(_THETA) * np.sqrt(np.pi)
 
 
 def _best_shift(observed: np.ndarray, model: np.ndarray) -> tuple[float, float]:
@@ -89,14 +79,23 @@ def screen(outline_xy: np.ndarray, families: tuple[Family, ...], slit_aspect: fl
     """Every family's best angle and RMS misfit for one outline, best first.
 
     ``slit_aspect`` (the outline's, None for none) is given to the families
-    that have an ``aspect`` parameter.
+    that have an ``aspect`` parameter; a family whose aperture varies its
+    ``roundness`` is tried at each of :data:`ROUNDNESS_GRID` and keeps the best.
     """
     observed = radial_signature(outline_xy)
     results = []
     for family in families:
         aperture = family.at(aspect=slit_aspect) if slit_aspect is not None else family.aperture
-        shift, rms = _best_shift(observed, _model_signature(aperture))
-        if aperture.has_angle:
-            aperture = aperture.replace(angle_deg=float(np.degrees(shift) % aperture.symmetry_deg))
-        results.append(Screen(family, aperture, rms))
+        tries = [aperture]
+        if "roundness" in aperture.parameters:
+            tries = [aperture.replace(roundness=r) for r in ROUNDNESS_GRID]
+        best = None
+        for model in tries:
+            shift, rms = _best_shift(observed, _model_signature(model))
+            if best is None or rms < best[2]:
+                best = (model, shift, rms)
+        model, shift, rms = best
+        if model.has_angle:
+            model = model.replace(angle_deg=float(np.degrees(shift) % model.symmetry_deg))
+        results.append(Screen(family, model, rms))
     return sorted(results, key=lambda s: s.rms)

@@ -22,14 +22,28 @@ from importlib import resources
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+import numpy as np
+
 import bokehfit
 from bokehfit.apertures import APERTURE_PARAM_FIELDS, CHANNELS, SHADER_FAMILIES
+from bokehfit.gpu.compute import Binding
 from bokehfit.gpu.layout import Struct
 
 if TYPE_CHECKING:  # importlib.resources.abc is Python 3.11+
     from importlib.resources.abc import Traversable
 
-__all__ = ["APERTURE_PARAMS", "MASK_TABLE_READ", "MASK_TABLE_STUB", "load_shader", "mask_table_wgsl", "shader_dir", "shader_source", "shape_ids_wgsl"]
+__all__ = [
+    "APERTURE_PARAMS",
+    "MASK_TABLE_BINDING",
+    "MASK_TABLE_READ",
+    "MASK_TABLE_STUB",
+    "load_shader",
+    "mask_table_data",
+    "mask_table_wgsl",
+    "shader_dir",
+    "shader_source",
+    "shape_ids_wgsl",
+]
 
 _INCLUDE = re.compile(r'^\s*//\s*#include\s+"([^"]+)"\s*$', re.MULTILINE)
 
@@ -37,14 +51,27 @@ _INCLUDE = re.compile(r'^\s*//\s*#include\s+"([^"]+)"\s*$', re.MULTILINE)
 #: description in the aperture model; fill it from ``Aperture.shader_params()``.
 APERTURE_PARAMS = Struct("ApertureParams", APERTURE_PARAM_FIELDS)
 
-#: The include ``mask_table`` of shaders that bind no mask table (the path tracer, the viewer):
-#: apertures.wgsl compiles there, and a mask aperture is not drawn by them.
+#: The include ``mask_table`` of shaders that bind no mask table (the test harnesses of single
+#: samplers): apertures.wgsl compiles there, and a mask aperture is not drawn by them.
 MASK_TABLE_STUB = "fn mask_table_value(i: u32) -> f32 { return 0.0; }\n"
 
 
 #: The include ``mask_table`` of a shader whose :class:`~bokehfit.gpu.compute.ComputeInterface`
-#: declares the binding ``mask_table: array<f32>`` (``MaskTable.gpu_table``) itself.
+#: declares the binding ``mask_table: array<f32>`` (:data:`MASK_TABLE_BINDING`) itself.
 MASK_TABLE_READ = "fn mask_table_value(i: u32) -> f32 { return mask_table[i]; }\n"
+
+#: The binding of a mask's CDF tables in the interface of every shader that samples the lens's
+#: aperture (kernel_mc, pathtrace, points); its buffer holds :func:`mask_table_data`.
+MASK_TABLE_BINDING = Binding("mask_table", "storage, read", "array<f32>")
+
+
+def mask_table_data(aperture) -> np.ndarray:
+    """The float32 contents of :data:`MASK_TABLE_BINDING` for ``aperture``.
+
+    A mask's CDF tables (``MaskTable.gpu_table``, read by WGSL ``sample_mask``);
+    a single 0 where the aperture is no mask, since the binding must exist.
+    """
+    return aperture.mask.gpu_table() if aperture.mask is not None else np.zeros(1, dtype=np.float32)
 
 
 def mask_table_wgsl(binding: int, group: int = 0) -> str:

@@ -21,20 +21,26 @@ non-decreasing (within :data:`CURVE_MONOTONIC_TOLERANCE`) and rising over
 curve (gamma 0, a division by zero, a curve that falls) makes the profile
 unusable: sRGB is assumed and a note says why.
 
-Curves of the known spaces come from colour-science
-(``colour.RGB_COLOURSPACES[name].cctf_decoding``) and are tabulated once per
-bit depth, so decoding an 8- or 16-bit image is a table look-up.
+The known spaces' curves and luminance weights are written here from their
+standards (:data:`_KNOWN`), the same definitions colour-science gives
+(``colour.RGB_COLOURSPACES[name]``: its ``cctf_decoding`` and the Y row of its
+``matrix_RGB_to_XYZ``; the tests hold them to it within 1e-12). colour-science
+is not imported to read a photo: its import pulls in matplotlib and costs
+about a second. An :class:`Encoding` tabulates its curves once per bit depth,
+on itself, so decoding an 8- or 16-bit image is a table look-up.
 
 References
 ----------
 ICC.1:2001-04 (v2) and ICC.1:2022 (v4) profile formats: header, tag table,
 ``desc``/``mluc``, ``curv``, ``para`` and ``XYZ`` tag types.
-IEC 61966-2-1 (sRGB); Adobe RGB (1998) Color Image Encoding, 2005.
+IEC 61966-2-1:1999 (sRGB); Adobe RGB (1998) Color Image Encoding, 2005;
+ISO 22028-2:2013 (ROMM RGB, which ProPhoto RGB is); Apple, Display P3 (2019:
+the DCI-P3 primaries with the D65 white); SMPTE RP 177-1993 (the normalised
+primary matrix).
 """
 
 from __future__ import annotations
 
-import functools
 import math
 import struct
 import warnings
@@ -52,7 +58,9 @@ __all__ = [
     "luminance_weights",
     "named_encoding",
     "linear_encoding",
+    "srgb_decode",
     "srgb_display_lut",
+    "srgb_encode",
 ]
 
 #: Colour spaces recognised by name, as colour-science names them, with the
@@ -75,9 +83,9 @@ CURVE_MIN_RISE = 0.01
 CURVE_CHECK_SAMPLES = 1025
 
 
-@functools.lru_cache(maxsize=1)
 def colour_science():
-    """The ``colour`` package, imported on first use (it takes over a second).
+    """The ``colour`` package (colour-science), imported on call: the reference the tests hold
+    the curves of :data:`_KNOWN` to (it takes about a second to import, matplotlib with it).
 
     colour-science warns at import about optional packages it can't find
     (matplotlib, …) that bokehfit does not use; those warnings are dropped here.
@@ -88,29 +96,75 @@ def colour_science():
     return colour
 
 
-@functools.lru_cache(maxsize=None)
-def _colourspace(name: str):
-    return colour_science().RGB_COLOURSPACES[name]
+def srgb_decode(encoded) -> np.ndarray:
+    """Linear light of sRGB-encoded values in [0, 1] (IEC 61966-2-1: the piecewise curve), float64.
+
+    The linear segment ends where the encoding's does, at the code of linear 0.0031308
+    (0.0404499…, as colour-science's ``eotf_sRGB`` takes it).
+    """
+    v = np.asarray(encoded, dtype=np.float64)
+    knee = 1.055 * 0.0031308 ** (1.0 / 2.4) - 0.055
+    return np.where(v <= knee, v / 12.92, np.maximum((v + 0.055) / 1.055, 0.0) ** 2.4)
 
 
-@functools.lru_cache(maxsize=None)
+def srgb_encode(linear) -> np.ndarray:
+    """sRGB encoding in [0, 1] of linear values in [0, 1] (IEC 61966-2-1), float64."""
+    x = np.asarray(linear, dtype=np.float64)
+    return np.where(x <= 0.0031308, x * 12.92, 1.055 * np.maximum(x, 0.0) ** (1.0 / 2.4) - 0.055)
+
+
+def _adobe_rgb_decode(encoded) -> np.ndarray:
+    """Adobe RGB (1998): a pure power curve, gamma 563/256 (sign kept below 0)."""
+    v = np.asarray(encoded, dtype=np.float64)
+    return np.sign(v) * np.abs(v) ** (563.0 / 256.0)
+
+
+def _romm_rgb_decode(encoded) -> np.ndarray:
+    """ROMM RGB (ProPhoto RGB), ISO 22028-2: linear below 16·E_t = 1/32, else the power 1.8.
+
+    E_t = 16^(1.8 / (1 − 1.8)) = 1/512 is where the two pieces meet.
+    """
+    v = np.asarray(encoded, dtype=np.float64)
+    threshold = 16.0 * 16.0 ** (1.8 / (1.0 - 1.8))
+    return np.where(v < threshold, v / 16.0, np.sign(v) * np.abs(v) ** 1.8)
+
+
+def _normalised_primary_matrix(primaries, white) -> np.ndarray:
+    """RGB → XYZ of primaries (x, y) × 3 and a white (x, y), white at Y = 1 (SMPTE RP 177-1993)."""
+    xy = np.asarray(primaries, dtype=np.float64)
+    xyz = np.stack([xy[:, 0] / xy[:, 1], np.ones(3), (1.0 - xy[:, 0] - xy[:, 1]) / xy[:, 1]])  # columns: X, Y, Z at Y = 1
+    wx, wy = white
+    white_xyz = np.array([wx / wy, 1.0, (1.0 - wx - wy) / wy])
+    return xyz * np.linalg.solve(xyz, white_xyz)
+
+
+#: The known spaces: (decoding curve, luminance weights = the Y row of RGB → XYZ). sRGB, Adobe
+#: RGB and ROMM RGB give their matrices in their standards (rounded as there); Display P3 is
+#: the DCI-P3 primaries with the D65 white (0.3127, 0.3290), its matrix derived from them.
+_KNOWN = {
+    "sRGB": (srgb_decode, (0.2126, 0.7152, 0.0722)),
+    "Adobe RGB (1998)": (_adobe_rgb_decode, (0.29734, 0.62736, 0.07529)),
+    "Display P3": (srgb_decode, tuple(float(w) for w in _normalised_primary_matrix(
+        [(0.680, 0.320), (0.265, 0.690), (0.150, 0.060)], (0.3127, 0.3290))[1])),
+    "ProPhoto RGB": (_romm_rgb_decode, (0.2880, 0.7119, 0.0001)),
+}
+
+
 def luminance_weights(name: str) -> tuple[float, float, float]:
-    """The Y row of the RGB→XYZ matrix of the colour space ``name``.
+    """The Y row of the RGB→XYZ matrix of the colour space ``name`` (one of :data:`KNOWN_SPACES`).
 
     Examples
     --------
     >>> [round(w, 4) for w in luminance_weights("sRGB")]
     [0.2126, 0.7152, 0.0722]
     """
-    row = np.asarray(_colourspace(name).matrix_RGB_to_XYZ, dtype=np.float64)[1]
-    return (float(row[0]), float(row[1]), float(row[2]))
+    if name not in _KNOWN:
+        raise ValueError(f"colour space must be one of {', '.join(KNOWN_SPACES)} (got {name!r})")
+    return _KNOWN[name][1]
 
 
 def _named_curve(name: str) -> Curve:
-    def decode(x: np.ndarray) -> np.ndarray:
-        return np.asarray(_colourspace(name).cctf_decoding(x), dtype=np.float64)
-
-    return decode
+    return _KNOWN[name][0]
 
 
 @dataclass(frozen=True, eq=False)
@@ -457,11 +511,9 @@ def detect_encoding(
     return encoding
 
 
-@functools.lru_cache(maxsize=None)
 def srgb_display_lut() -> np.ndarray:
     """uint8 sRGB code of every linear 16-bit value (index ``round(v · 65535)``): shape (65536,)."""
     linear = np.arange(65536, dtype=np.float64) / 65535.0
-    encoded = np.asarray(_colourspace("sRGB").cctf_encoding(linear), dtype=np.float64)
-    table = np.round(np.clip(encoded, 0.0, 1.0) * 255.0).astype(np.uint8)
+    table = np.round(np.clip(srgb_encode(linear), 0.0, 1.0) * 255.0).astype(np.uint8)
     table.setflags(write=False)
     return table

@@ -26,9 +26,8 @@ A ``mask`` aperture (design.md §3b): ``exact`` integrates its piecewise-constan
 transmission over each pixel exactly, at any angle and squeeze
 (:func:`bokehfit.kernels.exact.mask_coverage`); ``mc`` samples it with the
 WGSL twin ``sample_mask`` from the CDF tables in a storage buffer; ``raster``
-has no outline to draw for it and gives the exact kernel (the GL pipeline
-rasterises outlines; a textured-quad path is not written yet), reporting no
-samples.
+draws its transmission as a texture on the image's quad, super-sampled as the
+outlines are (:mod:`bokehfit.kernels.raster`).
 
 Vignetting: a kernel is always renormalised to sum to 1 (per channel); the
 light the barrel stops is reported as :attr:`Kernel.transmitted`, the share
@@ -52,11 +51,15 @@ from bokehfit.kernels.accuracy import plan_kernel
 from bokehfit.kernels.exact import coverage, mask_coverage, quadrant_area, rim_coverage
 from bokehfit.validate import RANGES, check
 
-__all__ = ["METHODS", "SAMPLINGS", "SIDES", "Kernel", "KernelMethod", "KernelClippedWarning", "compute_kernel", "render_kernel"]
+__all__ = ["AUTO", "METHODS", "SAMPLINGS", "SIDES", "Kernel", "KernelMethod", "KernelClippedWarning", "compute_kernel", "render_kernel"]
 
 SIDES = ("far", "near")
 #: Sample patterns of ``mc``: a jittered grid over u, or independent u.
 SAMPLINGS = ("stratified", "independent")
+#: The ``method`` that picks one for a kernel drawn on its own: the cheapest that meets the
+#: tolerance, the one-time start-up of its device included (no GPU is started for a kernel
+#: that ``exact`` draws sooner); ``exact`` when no tolerance is given.
+AUTO = "auto"
 #: Default sample count of the sampling methods.
 DEFAULT_SAMPLES = 2**22
 #: Largest kernel frame (pixels a side), disc diameter and sample count accepted
@@ -140,9 +143,6 @@ def _raster(aperture, scale, size, samples, seed, sampling, adapter=None, field_
 
     from bokehfit.kernels.raster import MAX_PASSES
 
-    if aperture.spec.tabulated:  # no outline to rasterise: the exact kernel (module notes)
-        return mask_coverage(aperture, scale, size), None, None
-
     # A sub-pixel disc asks for more super-samples per pixel than the float32
     # target counts exactly: it gets the most there are, MAX_PASSES, which
     # already resolves its coverage far below float32 rounding.
@@ -207,8 +207,8 @@ def compute_kernel(
     size = check("kernel_size", size, name="size")
     if side not in SIDES:
         raise InputError(f"side must be one of {', '.join(SIDES)} (got {side!r})")
-    if method is not None and method not in METHODS:
-        raise InputError(f"method must be one of {', '.join(METHODS)} (got {method!r})")
+    if method is not None and method not in METHODS and method != AUTO:
+        raise InputError(f"method must be one of {', '.join([*METHODS, AUTO])} (got {method!r})")
     if field_position is not None:
         pair = np.asarray(field_position, dtype=object)
         if pair.shape != (2,):
@@ -220,9 +220,10 @@ def compute_kernel(
     if tolerance is not None:
         if samples is not None:
             raise InputError("give samples or tolerance, not both")
-        plan = plan_kernel(aperture, diameter_px, size, tolerance, method)
+        alone = method == AUTO
+        plan = plan_kernel(aperture, diameter_px, size, tolerance, None if alone else method, count_startup=alone)
         method, samples, sampling, predicted = plan.method, plan.samples, plan.sampling, plan.predicted_l1
-    method = method or "exact"
+    method = "exact" if method in (None, AUTO) else method
     if sampling not in SAMPLINGS:
         raise InputError(f"sampling must be one of {', '.join(SAMPLINGS)} (got {sampling!r})")
     samples = DEFAULT_SAMPLES if samples is None else check("kernel_samples", samples, name="samples")
@@ -319,9 +320,12 @@ def render_kernel(
     side : {"far", "near"}
         A light behind the focus plane shows the aperture upright; one in front
         shows it rotated by 180°.
-    method : {"exact", "mc", "raster"}, optional
+    method : {"exact", "mc", "raster", "auto"}, optional
         See the module docstring. Default ``exact``; with ``tolerance`` and no
-        method, the cheapest method that meets the tolerance.
+        method, the cheapest method that meets the tolerance; ``auto`` (``AUTO``)
+        the same for a kernel drawn on its own, counting the one-time start-up of
+        the method's device (so a small kernel is ``exact`` and starts no GPU).
+        :attr:`Kernel.method` says which one drew it.
     samples : int, optional
         Point samples over the disc for ``mc`` and ``raster`` (default 2²²).
     blades, aspect : optional

@@ -4,7 +4,9 @@ Notes
 -----
 Let F(X, Y) be the area of the shape inside the quadrant {x ≤ X, y ≤ Y}. A
 pixel's coverage is F's second difference over its four corners, so one
-evaluation of F on the (size+1)² corner grid gives every pixel at once.
+evaluation of F on the (size+1)² corner grid gives every pixel at once. On
+a large frame :func:`coverage` evaluates F only at the corners of the pixels
+the outline crosses: every other pixel is wholly inside (1) or outside (0).
 
 F follows from Green's theorem: for a counter-clockwise boundary split into
 pieces y = f(x) that are monotone in x,
@@ -44,7 +46,7 @@ import numpy as np
 from bokehfit.apertures import Aperture, Arc, Outline, Segment, aperture_rows_to_image, image_to_aperture
 from bokehfit.apertures.samplers import x_minus_sin
 
-__all__ = ["RIM_SUPERSAMPLE", "coverage", "mask_coverage", "quadrant_area", "radial_fraction", "rim_coverage"]
+__all__ = ["RIM_SUPERSAMPLE", "coverage", "mask_border_segments", "mask_coverage", "quadrant_area", "radial_fraction", "rim_coverage"]
 
 
 @dataclass(frozen=True)
@@ -142,8 +144,13 @@ def _elliptic_pieces(arc: Arc) -> list[_Piece]:
 
 
 def _boundary(outline: Outline, scale: float) -> list[_Piece]:
+    return _scaled_boundary(outline.transformed(np.diag([scale, scale])))
+
+
+def _scaled_boundary(scaled: Outline) -> list[_Piece]:
+    """The monotone pieces of an outline already scaled to pixels."""
     pieces: list[_Piece] = []
-    for piece in outline.transformed(np.diag([scale, scale])).pieces:
+    for piece in scaled.pieces:
         if isinstance(piece, Segment):
             pieces.extend(_line_pieces(np.array([piece.start, piece.end]), closed=False))
         else:
@@ -163,8 +170,13 @@ def quadrant_area(
     outline = aperture if isinstance(aperture, Outline) else aperture.outline(field_position)
     xs = np.asarray(xs, dtype=np.float64)[None, :]
     ys = np.asarray(ys, dtype=np.float64)[:, None]
-    total = np.zeros((ys.shape[0], xs.shape[1]))
-    for piece in _boundary(outline, scale):
+    return _area_below_left(_boundary(outline, scale), xs, ys)
+
+
+def _area_below_left(pieces: list[_Piece], xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
+    """F(X, Y) of the module notes at the points (xs, ys), broadcast together."""
+    total = np.zeros(np.broadcast_shapes(xs.shape, ys.shape))
+    for piece in pieces:
         t = np.clip(xs, piece.x_min, piece.x_max)
         x_cross = np.minimum(t, piece.crossing(ys))
         h_cross = piece.antiderivative(x_cross)
@@ -174,6 +186,50 @@ def quadrant_area(
             integral = ys * (x_cross - piece.x_min) + piece.antiderivative(t) - h_cross
         total -= piece.sign * integral
     return total
+
+
+#: Largest spacing (pixels of arc length) of the points :func:`_edge_pixels` puts on the outline.
+_EDGE_SAMPLE_PX = 0.5
+#: :func:`coverage` integrates every pixel when the outline crosses more than this share of them,
+#: or when the whole grid costs fewer than this many corner-piece evaluations (an elliptic
+#: piece counting ``_ELLIPTIC_COST`` straight ones): finding the crossed pixels costs about
+#: that much (measured on two cores: polygons break even near 120-px frames, circles near 60).
+_EDGE_ONLY_SHARE = 0.5
+_EDGE_ONLY_MIN_WORK = 80_000
+_ELLIPTIC_COST = 4
+
+
+def _edge_pixels(scaled: Outline, size: int, origin: tuple[float, float]) -> np.ndarray:
+    """Pixels of the size × size grid (rows up in y) that the outline (scaled to pixels) may touch, as a bool mask.
+
+    ``origin`` is where the aperture's centre lies in pixel-index coordinates
+    (x, y). Points are put on every piece at most ``_EDGE_SAMPLE_PX`` apart (by
+    arc length), so every point of the outline is within a quarter pixel of one;
+    the pixels holding them, grown by one pixel all round, hold every pixel the
+    outline touches (its index is then within 0.5 + 0.25 + 0.5 < 2 of theirs).
+    """
+    pieces = scaled.pieces
+    segments = np.array([(p.start, p.end) for p in pieces if isinstance(p, Segment)], dtype=np.float64).reshape(-1, 2, 2)
+    steps = np.maximum(1, np.ceil(np.hypot(*(segments[:, 1] - segments[:, 0]).T) / _EDGE_SAMPLE_PX)).astype(np.int64)
+    which = np.repeat(np.arange(len(steps)), steps + 1)
+    along = (np.arange(len(which)) - np.repeat(np.cumsum(steps + 1) - (steps + 1), steps + 1)) / steps[which]
+    points = [segments[which, 0] + along[:, None] * (segments[which, 1] - segments[which, 0])]
+    for piece in pieces:
+        if not isinstance(piece, Segment):  # the ellipse moves at most max(rx, ry) per radian
+            count = max(2, math.ceil(max(piece.radii) * abs(piece.end - piece.start) / _EDGE_SAMPLE_PX) + 1)
+            points.append(piece.point(np.linspace(0.0, 1.0, count)))
+    xy = np.concatenate(points)
+    marked = np.zeros((size + 2, size + 2), dtype=bool)  # a one-pixel border for points just outside
+    cols = np.clip(np.floor(xy[:, 0] + origin[0] + 0.5), -1, size).astype(np.int64) + 1
+    rows = np.clip(np.floor(xy[:, 1] + origin[1] + 0.5), -1, size).astype(np.int64) + 1
+    marked[rows, cols] = True
+    grown = marked.copy()
+    grown[1:] |= marked[:-1]
+    grown[:-1] |= marked[1:]
+    wide = grown.copy()
+    wide[:, 1:] |= grown[:, :-1]
+    wide[:, :-1] |= grown[:, 1:]
+    return wide[1:-1, 1:-1]
 
 
 def coverage(
@@ -191,14 +247,53 @@ def coverage(
     ``flip`` shows the near side (:meth:`Aperture.near`: the shape and its
     vignetting cut turned by 180°). ``field_position`` places a vignetted
     aperture in the frame (design.md §3b); the clipped shape keeps its scale.
+
+    Notes
+    -----
+    Only the pixels the outline crosses need the integral: F is evaluated at
+    their corners alone (:func:`_edge_pixels` finds them). Every other pixel
+    lies wholly inside or wholly outside, and so does every pixel connected to
+    it through such pixels (4-connected): one exact pixel of each connected
+    region says which, and the region gets 1 or 0. The crossed pixels are
+    bit-identical to the integral over the whole grid; the others are the
+    exact 1 or 0 that the whole-grid integral reaches to within rounding.
     """
     centre = (size - 1) / 2.0
     edges = np.arange(size + 1, dtype=np.float64) - 0.5 - centre  # pixel borders, aperture frame
     if flip:
         aperture = aperture.near() if isinstance(aperture, Aperture) else aperture.transformed(-np.eye(2))
+    outline = aperture if isinstance(aperture, Outline) else aperture.outline(field_position)
+    scaled = outline.transformed(np.diag([scale, scale]))
+    pieces = _scaled_boundary(scaled)
     dx, dy = offset_xy
-    cumulative = quadrant_area(aperture, scale, edges - dx, edges - dy, field_position)
+    xs, ys = edges - dx, edges - dy
+    straight = sum(isinstance(piece, Segment) and piece.start[0] != piece.end[0] for piece in scaled.pieces)
+    work = (size + 1) ** 2 * (straight + _ELLIPTIC_COST * (len(pieces) - straight))
+    crossed = None if work < _EDGE_ONLY_MIN_WORK else _edge_pixels(scaled, size, (centre + dx, centre + dy))
+    if crossed is None or crossed.sum() > _EDGE_ONLY_SHARE * size * size:
+        cumulative = _area_below_left(pieces, xs[None, :], ys[:, None])
+        cells = cumulative[1:, 1:] - cumulative[:-1, 1:] - cumulative[1:, :-1] + cumulative[:-1, :-1]
+        return np.clip(aperture_rows_to_image(cells), 0.0, 1.0)  # rows of `cells` run up in y
+    import cv2
+
+    # One pixel of each region that the crossed pixels enclose joins them, to say which side it is on.
+    count, regions = cv2.connectedComponents((~crossed).astype(np.uint8), connectivity=4)
+    member = np.empty(count, dtype=np.int64)
+    member[regions.ravel()] = np.arange(size * size)  # some pixel of each region (label 0: the crossed ones)
+    probes = member[1:]
+    evaluate = crossed.copy()
+    evaluate.ravel()[probes] = True
+    corners = np.zeros((size + 1, size + 1), dtype=bool)
+    for dr in (0, 1):
+        for dc in (0, 1):
+            corners[dr : dr + size, dc : dc + size] |= evaluate
+    rows, cols = np.nonzero(corners)
+    cumulative = np.zeros((size + 1, size + 1))
+    cumulative[rows, cols] = _area_below_left(pieces, xs[cols], ys[rows])
     cells = cumulative[1:, 1:] - cumulative[:-1, 1:] - cumulative[1:, :-1] + cumulative[:-1, :-1]
+    inside = np.zeros(count)
+    inside[1:] = cells.ravel()[probes] > 0.5  # 0 or 1 up to rounding
+    cells = np.where(crossed, cells, inside[regions])
     return np.clip(aperture_rows_to_image(cells), 0.0, 1.0)  # rows of `cells` run up in y
 
 
@@ -237,6 +332,7 @@ def rim_coverage(
     field_position=None,
     supersample: int = RIM_SUPERSAMPLE,
     max_chord_error: float = 1e-6,
+    offset_xy: tuple[float, float] = (0.0, 0.0),
 ) -> tuple[np.ndarray, float]:
     """Light of an aperture with a ``rim`` profile on each pixel (tabulated), and its L1 error bound.
 
@@ -266,12 +362,14 @@ def rim_coverage(
     bound : float
         The L1 bound above, for the kernel normalised to sum to 1.
     """
-    fine = coverage(aperture, scale * supersample, size * supersample, field_position=field_position)
+    dx, dy = offset_xy
+    fine = coverage(aperture, scale * supersample, size * supersample, field_position=field_position,
+                    offset_xy=(dx * supersample, dy * supersample))
     centre = (size * supersample - 1) / 2.0
     coordinates = (np.arange(size * supersample) - centre) / (scale * supersample)  # unit-area units
     offsets_rc = np.stack(np.meshgrid(coordinates, coordinates, indexing="ij"), axis=-1)
     polygon = aperture.outline().polyline(max_chord_error)
-    rho, gradient = radial_fraction(image_to_aperture(offsets_rc), polygon)
+    rho, gradient = radial_fraction(image_to_aperture(offsets_rc) - np.array([dx, dy]) / scale, polygon)
     weight = 1.0 + aperture.rim * (2.0 * rho * rho - 1.0)
     image = (fine * weight).reshape(size, supersample, size, supersample).sum(axis=(1, 3)) / supersample**2
     rho_max = 1.0 + gradient * math.sqrt(2.0) / (scale * supersample)  # sub-pixel centres just outside the edge
@@ -279,6 +377,22 @@ def rim_coverage(
     h = 1.0 / supersample
     bound = (1.0 + abs(aperture.rim)) * lipschitz * h / math.sqrt(2.0) / max(1.0 - abs(aperture.rim), 1e-12)
     return image, bound
+
+
+def _mask_jumps(mask) -> tuple[np.ndarray, np.ndarray]:
+    """Transmission jumps across the mask's horizontal borders (h + 1, w) and vertical ones (h, w + 1).
+
+    Rows bottom first (y up), zero outside the image: horizontal, the cell
+    above minus the one below; vertical, the cell left minus the one right.
+    """
+    t = np.pad(mask.transmission[::-1], 1)
+    return t[1:, 1:-1] - t[:-1, 1:-1], t[1:-1, :-1] - t[1:-1, 1:]
+
+
+def mask_border_segments(mask) -> int:
+    """How many weighted border segments :func:`mask_coverage` integrates for ``mask`` (a MaskTable): its cost."""
+    jump_h, jump_v = _mask_jumps(mask)
+    return int(np.count_nonzero(jump_h) + np.count_nonzero(jump_v))
 
 
 def _mask_segments(aperture: Aperture) -> tuple[np.ndarray, np.ndarray]:
@@ -289,16 +403,14 @@ def _mask_segments(aperture: Aperture) -> tuple[np.ndarray, np.ndarray]:
     boundaries, each weighted by its transmission. Unit-area units, at angle 0.
     """
     mask = aperture.mask
-    t = np.pad(mask.transmission[::-1], 1)  # rows bottom first (y up), zero outside
     h, w = mask.shape
     cell = mask.cell
-    # Horizontal borders: between padded rows r and r + 1 (y = r·cell − h/2·cell), columns 0..w−1.
-    jump_h = t[1:, 1:-1] - t[:-1, 1:-1]  # (h + 1, w): above minus below
+    # Horizontal borders: between padded rows r and r + 1 (y = r·cell − h/2·cell), columns 0..w−1;
+    # vertical borders: between padded columns c and c + 1 (x = c·cell − w/2·cell), rows 0..h−1.
+    jump_h, jump_v = _mask_jumps(mask)
     rows, cols = np.nonzero(jump_h)
     start_h = np.stack([cols, rows], axis=-1).astype(np.float64)
     end_h = start_h + [1.0, 0.0]
-    # Vertical borders: between padded columns c and c + 1 (x = c·cell − w/2·cell), rows 0..h−1.
-    jump_v = t[1:-1, :-1] - t[1:-1, 1:]  # (h, w + 1): left minus right
     vrows, vcols = np.nonzero(jump_v)
     start_v = np.stack([vcols, vrows], axis=-1).astype(np.float64)
     end_v = start_v + [0.0, 1.0]

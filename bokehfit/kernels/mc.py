@@ -26,7 +26,7 @@ from bokehfit.errors import InputError
 from bokehfit.gpu import AdapterChoice, get_gpu
 from bokehfit.gpu.compute import Binding, ComputeInterface, dispatch
 from bokehfit.gpu.layout import Struct
-from bokehfit.gpu.shaders import APERTURE_PARAMS, MASK_TABLE_READ, load_shader
+from bokehfit.gpu.shaders import APERTURE_PARAMS, MASK_TABLE_BINDING, MASK_TABLE_READ, load_shader, mask_table_data
 
 __all__ = ["KERNEL_INTERFACE", "KERNEL_PARAMS", "band_rows", "mc_counts", "prepare_pipeline"]
 
@@ -51,7 +51,7 @@ KERNEL_INTERFACE = ComputeInterface(
         Binding("params", "uniform", "KernelParams"),
         Binding("counts", "storage, read_write", "array<atomic<u32>>"),
         Binding("aperture", "uniform", "ApertureParams"),
-        Binding("mask_table", "storage, read", "array<f32>"),
+        MASK_TABLE_BINDING,
     ),
     workgroup_size=(256,),
 )
@@ -122,9 +122,7 @@ def mc_counts(
     shape_params = device.create_buffer_with_data(
         data=APERTURE_PARAMS.pack(**aperture.shader_params(field_position)), usage=wgpu.BufferUsage.UNIFORM
     )
-    # A mask's CDF tables (sample_mask); a single float where the aperture has none (the binding must exist).
-    table = aperture.mask.gpu_table() if aperture.mask is not None else np.zeros(1, dtype=np.float32)
-    mask_table = device.create_buffer_with_data(data=table.tobytes(), usage=wgpu.BufferUsage.STORAGE)
+    mask_table = device.create_buffer_with_data(data=mask_table_data(aperture).tobytes(), usage=wgpu.BufferUsage.STORAGE)
     pipeline = prepare_pipeline(adapter)
     groups = min(-(-drawn // (KERNEL_INTERFACE.threads * _SAMPLES_PER_THREAD)), device.limits["max-compute-workgroups-per-dimension"])
     histogram = np.empty((size, size), dtype=np.uint32)

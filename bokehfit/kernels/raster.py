@@ -14,6 +14,15 @@ triangle (centre, a, b) carries the radial fraction ρ of design.md §3b as a
 vertex attribute (0 at the centre, 1 on the outline): it is exactly linear
 over the triangle, so every fragment gets its ``rim`` weight 1 + rim·(2ρ² − 1)
 exactly. Fragments outside the vignetting barrel's circle are discarded.
+
+A ``mask`` aperture (design.md §3b) has no outline to fill: its transmission
+image is a float32 texture, drawn on the quad of the scaled, rotated and
+squeezed image rectangle. Each fragment maps its position back to the mask's
+cells (the inverse of scale·squeeze·rotation) and takes that cell's
+transmission with ``texelFetch`` (no filtering: the density is piecewise
+constant, :func:`bokehfit.apertures.mask_pdf`), so the super-samples
+converge to the exact box integral (:func:`bokehfit.kernels.exact.mask_coverage`)
+as they do to the area coverage of an outline.
 """
 
 from __future__ import annotations
@@ -56,8 +65,19 @@ in float radial;
 uniform float disc_radius;  // > 0: draw the disc inscribed in the quad
 uniform float rim;          // intensity profile (design.md 3b)
 uniform vec3 barrel;        // vignetting circle: centre .xy, radius .z (0: none), pixels
+uniform ivec2 mask_cells;   // a mask's columns and rows (0, 0: no mask)
+uniform mat2 to_cells;      // pixels from the light -> mask cells from the mask image's centre
+uniform sampler2D transmission;  // the mask's transmission, row 0 the bottom (y up)
 out float coverage;
 void main() {
+    if (mask_cells.x > 0) {
+        vec2 cell = floor(to_cells * frame_position + 0.5 * vec2(mask_cells));
+        if (any(lessThan(cell, vec2(0.0))) || any(greaterThanEqual(cell, vec2(mask_cells)))) {
+            discard;
+        }
+        coverage = texelFetch(transmission, ivec2(cell), 0).r;
+        return;
+    }
     float rho = radial;
     if (disc_radius > 0.0) {
         float r2 = dot(frame_position, frame_position);
@@ -96,8 +116,20 @@ def gl_renderer() -> str:
     return _context()[0].info["GL_RENDERER"]
 
 
+def _mask_frame(aperture: Aperture, scale: float) -> np.ndarray:
+    """The 2×2 map from unit-area mask coordinates at angle 0 to pixels: scale·squeeze·rotation."""
+    return scale * aperture.squeeze_matrix() @ aperture.rotation()
+
+
 def _triangles(aperture: Aperture, scale: float) -> tuple[np.ndarray, float]:
-    """Triangle list (x, y, radial fraction) of the scaled unclipped outline, and the disc radius (0 for polygons)."""
+    """Triangle list (x, y, radial fraction) of the scaled unclipped outline, and the disc radius (0 for polygons).
+
+    A mask's are the two triangles of its image rectangle, mapped to pixels.
+    """
+    if aperture.mask is not None:
+        w, h = aperture.mask.half_size
+        corners = np.array([[-w, -h], [w, -h], [w, h], [-w, -h], [w, h], [-w, h]]) @ _mask_frame(aperture, scale).T
+        return np.column_stack([corners, np.zeros(6)]), 0.0
     vertices = aperture.vertices()
     if vertices is None:
         r = abs(scale) / math.sqrt(math.pi)
@@ -139,6 +171,20 @@ def raster_counts(
         cx, cy = abs(scale) * aperture.vignetting.shift * CIRCLE_RADIUS * q
         barrel = (float(cx), float(cy), abs(scale) * aperture.vignetting.radius * CIRCLE_RADIUS)
     program["barrel"].value = barrel
+    texture = None
+    if aperture.mask is not None:
+        mask = aperture.mask
+        h, w = mask.shape
+        # Pixels → cells: the inverse of _mask_frame, over the cell side. GLSL matrices are column-major.
+        to_cells = np.linalg.inv(_mask_frame(aperture, scale)) / mask.cell
+        program["to_cells"].value = tuple(float(v) for v in to_cells.T.ravel())
+        program["mask_cells"].value = (w, h)
+        texture = ctx.texture((w, h), 1, data=np.ascontiguousarray(mask.transmission[::-1], dtype="f4").tobytes(), dtype="f4")
+        texture.filter = (ctx.NEAREST, ctx.NEAREST)
+        texture.use(location=0)
+        program["transmission"].value = 0
+    else:
+        program["mask_cells"].value = (0, 0)
     vertex_buffer = ctx.buffer(triangles.astype("f4").tobytes())
     offset_buffer = ctx.buffer((-sample_positions).astype("f4").tobytes())
     vao = ctx.vertex_array(program, [(vertex_buffer, "2f 1f", "position", "fraction"), (offset_buffer, "2f/i", "offset")])
@@ -153,6 +199,7 @@ def raster_counts(
         vao.render(instances=drawn)
         data = np.frombuffer(framebuffer.read(components=1, dtype="f4"), dtype=np.float32)
     finally:
-        for resource in (vao, vertex_buffer, offset_buffer, framebuffer, target):
-            resource.release()
+        for resource in (vao, vertex_buffer, offset_buffer, framebuffer, target, texture):
+            if resource is not None:
+                resource.release()
     return aperture_rows_to_image(data.reshape(size, size)), drawn  # the framebuffer's rows run up in y

@@ -24,7 +24,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy import optimize
 
 __all__ = ["efd_coefficients", "normalise_efd", "efd_aligned_distance"]
 
@@ -123,6 +122,8 @@ def efd_aligned_distance(normal_a: np.ndarray, normal_b: np.ndarray) -> tuple[fl
         The Euclidean distance between the real vectors [a_n, b_n, c_n, d_n]
         of A and of B moved by (τ, ψ), radians.
     """
+    from scipy.optimize import minimize_scalar  # on first use: scipy.optimize takes ~0.3 s to import
+
     pa, ma = _to_complex(normal_a)
     pb, mb = _to_complex(normal_b)
     n = np.arange(1, len(normal_a) + 1)
@@ -148,7 +149,7 @@ def efd_aligned_distance(normal_a: np.ndarray, normal_b: np.ndarray) -> tuple[fl
     # to the tolerance rather than to its square root.
     # Searched as an offset from the grid point: the bounded search's tolerance
     # has a term relative to |x| (√ε·|x|), which an offset keeps small.
-    refined = optimize.minimize_scalar(
+    refined = minimize_scalar(
         lambda offset: pose(best + offset)[0], bounds=(-step, step), method="bounded", options={"xatol": 1e-13}
     )
     tau = best + float(refined.x) if refined.fun < pose(best)[0] else best

@@ -305,17 +305,30 @@ def _scanline_crossings(mids, x0, y0, y1, slope, tag):
 class DistanceToOutline:
     """Distances from points to the nearest point of a closed outline (its sides, not only its vertices)."""
 
-    def __init__(self, outline: np.ndarray):
-        self.start = outline
-        self.side = following(outline) - outline
-        self.length_sq = np.sum(self.side * self.side, axis=1)
+    #: Point-side pairs evaluated at once by :meth:`__call__` (bounds its memory: ~16 MiB of float64 temporaries).
+    PAIRS_PER_CHUNK = 2**18
 
-    def __call__(self, points: np.ndarray, chunk: int = 256) -> np.ndarray:
-        points = np.atleast_2d(points)
+    def __init__(self, outline: np.ndarray):
+        self.start = np.asarray(outline, dtype=np.float64)
+        self.side = following(self.start) - self.start
+        self.length_sq = np.sum(self.side * self.side, axis=1)
+        # A zero-length side (a repeated point) is its start point: its t is 0.
+        self._inverse_length_sq = np.divide(1.0, self.length_sq, out=np.zeros_like(self.length_sq),
+                                            where=self.length_sq > 0.0)
+
+    def to_sides(self, x: np.ndarray, y: np.ndarray, sides=slice(None)) -> np.ndarray:
+        """Distance from the points (x, y) to the sides ``sides`` (indices), broadcast together."""
+        dx, dy = x - self.start[sides, 0], y - self.start[sides, 1]
+        vx, vy = self.side[sides, 0], self.side[sides, 1]
+        t = np.clip((dx * vx + dy * vy) * self._inverse_length_sq[sides], 0.0, 1.0)
+        ex, ey = dx - t * vx, dy - t * vy
+        return np.sqrt(ex * ex + ey * ey)
+
+    def __call__(self, points: np.ndarray) -> np.ndarray:
+        points = np.atleast_2d(np.asarray(points, dtype=np.float64))
         result = np.empty(len(points))
+        chunk = max(1, self.PAIRS_PER_CHUNK // len(self.start))
         for first in range(0, len(points), chunk):
-            p = points[first : first + chunk, None, :]
-            t = np.clip(np.sum((p - self.start) * self.side, axis=2) / self.length_sq, 0.0, 1.0)
-            nearest = self.start + t[..., None] * self.side
-            result[first : first + chunk] = np.sqrt(np.min(np.sum((p - nearest) ** 2, axis=2), axis=1))
+            p = points[first : first + chunk]
+            result[first : first + chunk] = self.to_sides(p[:, 0, None], p[:, 1, None]).min(axis=1)
         return result

@@ -17,7 +17,7 @@ import math
 import cv2
 import numpy as np
 
-from bokehfit.compare import Comparison, evidence_words, fstop_text
+from bokehfit.compare import Comparison, evidence_words, fstop_text, kernel_words
 from bokehfit.fit.pixels import model_window
 from bokehfit.metrics import METRICS
 from bokehfit.report.overlay import ROLE_BGR, disc_role, draw_disc_overlay
@@ -263,7 +263,7 @@ def build_html(comparison: Comparison, command_line: str) -> str:
         angle = "" if drawn["angle_deg"] is None else f" at {drawn['angle_deg']:.2f}°"
         parts.append(
             f"<h2>Matched kernel</h2><p>The fitted aperture{html.escape(angle)}, {drawn['diameter_px']:.2f} px, "
-            f"{drawn['samples']} samples on {html.escape(comparison.kernel.device or '')}, {drawn['time_s'] * 1000:.1f} ms.</p>"
+            f"{html.escape(kernel_words(data))}, {drawn['time_s'] * 1000:.1f} ms.</p>"
             f'<img src="{_data_uri(cv2.resize(kernel8, None, fx=zoom, fy=zoom, interpolation=cv2.INTER_NEAREST))}" alt="kernel"><br>'
             + _colour_bar("share of the light per pixel", [(0.0, "#000"), (1.0, "#fff")], ["0", f"{peak:.2e}"])
         )
@@ -289,6 +289,6 @@ def build_html(comparison: Comparison, command_line: str) -> str:
     parts.append("<h2>Geometry</h2>" + _table(["quantity", "value", "source"], geometry_rows))
     parts.append("<h2>Timing</h2>" + _table(["stage", "seconds"], [[k, f"{v:.2f}"] for k, v in data["timing_s"].items()]))
     parts.append(f"<p><small>{html.escape(command_line)}<br>input: {html.escape(photo.linearisation)}; "
-                 f"device: {html.escape(str(comparison.device.get('adapter')))}; status {html.escape(status)}</small></p>"
+                 f"kernel: {html.escape(kernel_words(data))}; status {html.escape(status)}</small></p>"
                  "</body></html>")
     return "\n".join(parts)

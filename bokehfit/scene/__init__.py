@@ -108,6 +108,7 @@ def render(
     vignetting=None,
     rim: float = 0.0,
     chromatic=None,
+    mask=None,
     spp: int = 64,
     width: int = 512,
     height: int = 512,
@@ -131,6 +132,9 @@ def render(
         Its real-lens features (design.md §3b; ``make_aperture`` takes them
         the same way): rounded blades, anamorphic squeeze, cat-eye vignetting
         ``{radius, shift}``, intensity profile, longitudinal colour ``{red, blue}``.
+    mask : MaskTable, path or 2-D array, optional
+        The transmission image of shape ``"mask"`` (design.md §3b), sampled by
+        both renderers from its CDF tables.
     fstop : float
         Equal-area f-stop: the aperture has the area of a circle of diameter f/N.
     focus_distance_m : float, optional
@@ -182,6 +186,7 @@ def render(
         vignetting=vignetting,
         rim=rim,
         chromatic=chromatic,
+        mask=mask,
         focal_length_mm=focal_length_mm,
         sensor_width_mm=sensor_width_mm,
     )

@@ -68,11 +68,6 @@ class Lens:
     focal_length_mm: float = FOCAL_LENGTH_MM
     sensor_width_mm: float = SENSOR_WIDTH_MM
 
-    def __post_init__(self) -> None:
-        if self.aperture.spec.tabulated:
-            # The renderers bind no mask table (kernels do): refuse rather than sample a stub.
-            raise InputError(f"the renderer does not sample tabulated apertures yet (got shape {self.aperture.shape!r})")
-
     @property
     def aperture_diameter_mm(self) -> float:
         """Diameter of the circle with the aperture's area, f/N (mm)."""
@@ -111,6 +106,7 @@ class Lens:
             vignetting=None if a.vignetting is None else dict(radius=a.vignetting.radius, shift=a.vignetting.shift),
             rim=a.rim,
             chromatic=None if a.chromatic is None else dict(red=a.chromatic.red, blue=a.chromatic.blue),
+            mask=None if a.mask is None else dict(width=a.mask.shape[1], height=a.mask.shape[0], sha256=a.mask.digest),
             fstop=self.fstop,
             focus_distance_m=self.focus_distance_m,
             focal_length_mm=self.focal_length_mm,
@@ -133,6 +129,7 @@ def make_lens(
     vignetting: Vignetting | dict | None = None,
     rim: float = 0.0,
     chromatic: Chromatic | dict | None = None,
+    mask=None,
     focal_length_mm: float = FOCAL_LENGTH_MM,
     sensor_width_mm: float = SENSOR_WIDTH_MM,
 ) -> Lens:
@@ -140,8 +137,10 @@ def make_lens(
 
     The numbers must lie in the ranges of ``bokehfit.validate.RANGES``, and
     the focus distance beyond the focal length. ``roundness``, ``squeeze``,
-    ``vignetting``, ``rim`` and ``chromatic`` are the real-lens features of
-    design.md §3b, as :func:`bokehfit.apertures.make_aperture` takes them.
+    ``vignetting``, ``rim``, ``chromatic`` and ``mask`` (the transmission image
+    of shape ``mask``: a PNG path, an array or a ``MaskTable``) are the
+    real-lens features of design.md §3b, as :func:`bokehfit.apertures.make_aperture`
+    takes them.
 
     Raises
     ------
@@ -156,7 +155,7 @@ def make_lens(
     """
     aperture = make_aperture(
         shape, angle_deg, blades=blades, aspect=aspect, roundness=roundness, squeeze=squeeze,
-        vignetting=vignetting, rim=rim, chromatic=chromatic,
+        vignetting=vignetting, rim=rim, chromatic=chromatic, mask=mask,
     )
     fstop = check("fstop", fstop)
     focus = check("focus_distance_m", focus_distance_m)

@@ -14,7 +14,9 @@ Two renderers, chosen by the scene's type:
     differ in size and are splatted one after the other.
 
 Both send the lens's whole aperture (:meth:`bokehfit.apertures.Aperture.shader_params`)
-in the uniform; camera.wgsl samples it with ``sample_aperture_params``.
+in the uniform, and a custom mask's CDF tables in the storage buffer ``mask_table``
+(:data:`bokehfit.gpu.shaders.MASK_TABLE_BINDING`, as the Monte-Carlo kernel binds them);
+camera.wgsl samples it with ``sample_aperture_params``.
 
 Images larger than the adapter allows in one binding (``max-storage-buffer-binding-size``,
 16 bytes a pixel) or one dispatch (``max-compute-workgroups-per-dimension``) are
@@ -41,7 +43,7 @@ from bokehfit.apertures import APERTURE_PARAM_FIELDS, CHANNELS, image_to_apertur
 from bokehfit.gpu import AdapterChoice, get_gpu
 from bokehfit.gpu.compute import Binding, ComputeInterface, dispatch
 from bokehfit.gpu.layout import Struct
-from bokehfit.gpu.shaders import load_shader
+from bokehfit.gpu.shaders import MASK_TABLE_BINDING, MASK_TABLE_READ, load_shader, mask_table_data
 from bokehfit.scene.camera import Lens, RenderSettings
 from bokehfit.scene.geometry import BOX, MATERIAL, QUAD, SPHERE, Pose, Scene
 from bokehfit.scene.wgsl import scene_wgsl
@@ -107,7 +109,7 @@ _ACCUM_BYTES = 16  # vec4f per pixel
 #: Bind group 0 and workgroup size of ``pathtrace.wgsl`` (its generated include ``interface``):
 #: 8 × 8 pixels a workgroup, the 64 invocations browsers allow everywhere.
 PATHTRACE_INTERFACE = ComputeInterface(
-    (Binding("params", "uniform", "RenderParams"), Binding("accum", "storage, read_write", "array<vec4f>")),
+    (Binding("params", "uniform", "RenderParams"), Binding("accum", "storage, read_write", "array<vec4f>"), MASK_TABLE_BINDING),
     workgroup_size=(8, 8),
 )
 #: Bind group 0 and workgroup size of ``points.wgsl`` (entry points ``splat`` and ``resolve``).
@@ -117,6 +119,7 @@ POINTS_INTERFACE = ComputeInterface(
         Binding("light", "uniform", "PointParams"),
         Binding("counts", "storage, read_write", "array<atomic<u32>>"),
         Binding("accum", "storage, read_write", "array<vec4f>"),
+        MASK_TABLE_BINDING,
     ),
     workgroup_size=(256,),
 )
@@ -216,8 +219,8 @@ def lens_aperture_wgsl() -> str:
 
 
 def _generated(*structs: Struct) -> dict[str, str]:
-    """Generated includes of the renderers: the structs' declarations and ``lens_aperture``."""
-    return {**{s.name: s.wgsl() for s in structs}, "lens_aperture": lens_aperture_wgsl()}
+    """Generated includes of the renderers: the structs' declarations, ``lens_aperture`` and ``mask_table``."""
+    return {**{s.name: s.wgsl() for s in structs}, "lens_aperture": lens_aperture_wgsl(), "mask_table": MASK_TABLE_READ}
 
 
 @lru_cache(maxsize=16)
@@ -317,6 +320,13 @@ class _Ticker:
         self.last = time.perf_counter()
 
 
+def _mask_table_buffer(device, lens: Lens):
+    """The storage buffer of the binding ``mask_table``: the lens's mask tables, or one 0 (:func:`mask_table_data`)."""
+    import wgpu
+
+    return device.create_buffer_with_data(data=mask_table_data(lens.aperture).tobytes(), usage=wgpu.BufferUsage.STORAGE)
+
+
 def _read_tile(device, accum, tile) -> np.ndarray:
     _, _, w, h = tile
     return np.frombuffer(device.queue.read_buffer(accum), dtype=np.float32).reshape(h, w, 4)
@@ -332,13 +342,14 @@ def _path_trace(scene: Scene, lens: Lens, settings: RenderSettings, progress, ad
     pipeline = _pathtrace_pipeline(scene_wgsl(scene, mirror_nee=settings.mirror_nee), adapter)
     record = render_params(lens, settings, scene.pose)
     uniform = device.create_buffer(size=RENDER_PARAMS.dtype.itemsize, usage=wgpu.BufferUsage.UNIFORM | wgpu.BufferUsage.COPY_DST)
+    mask_table = _mask_table_buffer(device, lens)
     max_side = min(_TILE_GROUP_X, _TILE_GROUP_Y) * device.limits["max-compute-workgroups-per-dimension"]
     tiles = tile_plan(settings.width, settings.height, _max_tile_pixels(device, settings), max_side)
     # Warm-up: an empty tile, so that a driver that compiles at the first dispatch
     # (lavapipe does) does it inside the setup time, not the render time.
     probe = device.create_buffer(size=_ACCUM_BYTES, usage=wgpu.BufferUsage.STORAGE | wgpu.BufferUsage.COPY_SRC)
     device.queue.write_buffer(uniform, 0, record.tobytes())  # tile 0 × 0: every invocation returns
-    dispatch(device, pipeline, PATHTRACE_INTERFACE.bind(device, pipeline, params=uniform, accum=probe), 1, 1)
+    dispatch(device, pipeline, PATHTRACE_INTERFACE.bind(device, pipeline, params=uniform, accum=probe, mask_table=mask_table), 1, 1)
     device.queue.read_buffer(probe)
     setup = time.perf_counter() - start
 
@@ -348,7 +359,7 @@ def _path_trace(scene: Scene, lens: Lens, settings: RenderSettings, progress, ad
         x, y, w, h = tile
         accum = device.create_buffer(size=_ACCUM_BYTES * w * h, usage=wgpu.BufferUsage.STORAGE | wgpu.BufferUsage.COPY_SRC)
         ticker = _Ticker(device, progress, accum)
-        bind_group = PATHTRACE_INTERFACE.bind(device, pipeline, params=uniform, accum=accum)
+        bind_group = PATHTRACE_INTERFACE.bind(device, pipeline, params=uniform, accum=accum, mask_table=mask_table)
         set_tile(record, tile)
         groups = (-(-w // _TILE_GROUP_X), -(-h // _TILE_GROUP_Y))
         for sample in range(settings.spp):
@@ -426,6 +437,7 @@ def _splat(scene: PointScene, lens: Lens, settings: RenderSettings, progress, ad
     record = render_params(lens, settings, Pose((0.0, 0.0, 0.0)))
     uniform = device.create_buffer(size=RENDER_PARAMS.dtype.itemsize, usage=wgpu.BufferUsage.UNIFORM | wgpu.BufferUsage.COPY_DST)
     light_uniform = device.create_buffer(size=POINT_PARAMS.dtype.itemsize, usage=wgpu.BufferUsage.UNIFORM | wgpu.BufferUsage.COPY_DST)
+    mask_table = _mask_table_buffer(device, lens)
     tiles = tile_plan(settings.width, settings.height, _max_tile_pixels(device, settings), settings.width)
     plans = _light_plan(scene, lens, settings)
     max_groups = device.limits["max-compute-workgroups-per-dimension"]
@@ -433,7 +445,7 @@ def _splat(scene: PointScene, lens: Lens, settings: RenderSettings, progress, ad
     device.queue.write_buffer(uniform, 0, record.tobytes())
     device.queue.write_buffer(light_uniform, 0, np.zeros((), dtype=POINT_PARAMS.dtype).tobytes())
     probes = [device.create_buffer(size=_ACCUM_BYTES, usage=wgpu.BufferUsage.STORAGE | wgpu.BufferUsage.COPY_SRC) for _ in range(2)]
-    dispatch(device, splat, POINTS_INTERFACE.bind(device, splat, params=uniform, light=light_uniform, counts=probes[0]), 1)
+    dispatch(device, splat, POINTS_INTERFACE.bind(device, splat, params=uniform, light=light_uniform, counts=probes[0], mask_table=mask_table), 1)
     resolve_probe = POINTS_INTERFACE.bind(device, resolve, params=uniform, light=light_uniform, counts=probes[0], accum=probes[1])
     dispatch(device, resolve, resolve_probe, 1)
     device.queue.read_buffer(probes[1])
@@ -450,7 +462,7 @@ def _splat(scene: PointScene, lens: Lens, settings: RenderSettings, progress, ad
         counts = device.create_buffer(size=4 * w * h, usage=wgpu.BufferUsage.STORAGE)
         accum = device.create_buffer(size=_ACCUM_BYTES * w * h, usage=wgpu.BufferUsage.STORAGE | wgpu.BufferUsage.COPY_SRC)
         ticker = _Ticker(device, progress, accum)
-        splat_group = POINTS_INTERFACE.bind(device, splat, params=uniform, light=light_uniform, counts=counts)
+        splat_group = POINTS_INTERFACE.bind(device, splat, params=uniform, light=light_uniform, counts=counts, mask_table=mask_table)
         resolve_group = POINTS_INTERFACE.bind(device, resolve, params=uniform, light=light_uniform, counts=counts, accum=accum)
         for plan in plans:
             x0, y0, x1, y1 = plan["box"]

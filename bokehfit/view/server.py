@@ -23,13 +23,24 @@ Routes
     Uniform layout, entry point and workgroup size (read from the WGSL),
     scene sketch (walls, block, balls, camera), lens constants, shapes,
     slider ranges and the default settings.
-``GET /params.json?shape=&angle=&fstop=&focus=&blades=&aspect=&width=&height=``
+``GET /params.json?shape=&angle=&fstop=&focus=&blades=&aspect=&width=&height=&mask=``
     The uniform record's values for these settings (tile = the whole image,
     sample_index 0), the lens as text and JSON, and the depth of field.
+    ``mask`` names an uploaded mask (its digest) for shape ``mask``.
     Bad settings: 400 with ``{"error": message}``.
 ``POST /matched``
     Body: a ``bokehfit compare --json`` document; answer: the viewer
     settings of its fitted aperture (:func:`settings_from_compare`).
+``POST /mask``
+    Body: an image file (PNG) of transmission, the custom ``mask`` aperture
+    of design.md §3b; the server builds its :class:`~bokehfit.apertures.MaskTable`
+    (:func:`~bokehfit.apertures.mask.decode_mask`, the same code as
+    ``--mask`` of the command line), keeps the last ``MAX_MASKS`` by digest
+    and answers the digest, size and the URL of its tables.
+``GET /mask_table?mask=DIGEST``
+    The mask's CDF tables as little-endian float32 (``MaskTable.gpu_table``):
+    the contents of the path tracer's ``mask_table`` binding, which the page
+    uploads as they are.
 
 Every other path answers 404, and a route asked with a method it does not
 serve answers 405 with ``Allow``.
@@ -66,7 +77,8 @@ from urllib.parse import parse_qs, urlsplit
 import numpy as np
 
 from bokehfit import __version__
-from bokehfit.apertures import SHAPES, Aperture, make_aperture
+from bokehfit.apertures import SHAPES, Aperture, MaskTable, make_aperture
+from bokehfit.apertures.mask import MAX_MASK_SIDE, decode_mask
 from bokehfit.apertures.shapes import DEFAULT_SLIT_ASPECT, MAX_BLADES
 from bokehfit.errors import InputError, check_finite
 from bokehfit.gpu.layout import Struct
@@ -80,9 +92,11 @@ from bokehfit.validate import RANGES
 __all__ = [
     "COC_DIVISOR",
     "DepthOfField",
+    "MaskStore",
     "ViewerServer",
     "depth_of_field",
     "json_depth",
+    "mask_upload",
     "params_for_query",
     "parse_json_body",
     "pathtrace_source",
@@ -119,8 +133,10 @@ FEATURE_SLIDERS = {
 }
 #: Where the vignetting sliders start when the barrel is switched on (it is off by default).
 VIGNETTING_START = {"radius": 1.5, "shift": 1.0}
-#: Largest request body of POST /matched (bytes).
+#: Largest request body of POST /matched and POST /mask (bytes).
 MAX_BODY_BYTES = 8 * 2**20
+#: Uploaded masks the server keeps (the most recently used); an older one must be uploaded again.
+MAX_MASKS = 8
 #: Longest request line (method, target and version, bytes): 414 beyond.
 MAX_REQUEST_LINE_BYTES = 8192
 #: Largest header block (names, values and separators, bytes): 431 beyond. The
@@ -159,8 +175,12 @@ _ROUTES = {
     "/config.json": _READ,
     "/params.json": _READ,
     "/favicon.ico": _READ,
+    "/mask_table": _READ,
     "/matched": ("POST",),
+    "/mask": ("POST",),
 }
+#: What the body of each POST route must be, for the message when it is empty.
+_POST_BODIES = {"/matched": "a `bokehfit compare --json` result", "/mask": "an image file (PNG) of transmission"}
 _METHODS = ("GET", "HEAD", "POST")
 
 
@@ -319,10 +339,10 @@ def _deepest_point_m(scene: Scene) -> float:
 
 
 def _shape_entries() -> list[dict]:
+    """The shapes of the page's menu; ``tabulated`` ones (``mask``) need an uploaded image first."""
     entries = []
     for name, spec in SHAPES.items():
-        if spec.tabulated:
-            continue  # the viewer does not sample a mask yet
+        example = make_aperture(name, blades=3 if spec.takes_blades else None, mask=[[1.0]] if spec.tabulated else None)
         entries.append(
             {
                 "name": name,
@@ -331,10 +351,53 @@ def _shape_entries() -> list[dict]:
                 "takes_aspect": spec.takes_aspect,
                 "rounds": spec.rounds,
                 "fixed_blades": spec.fixed_blades,
-                "has_angle": make_aperture(name, blades=3 if spec.takes_blades else None).has_angle,
+                "tabulated": spec.tabulated,
+                "has_angle": example.has_angle,
             }
         )
     return entries
+
+
+class MaskStore:
+    """The masks uploaded to one server (``POST /mask``), by digest: the last ``capacity`` used, thread-safe."""
+
+    def __init__(self, capacity: int = MAX_MASKS):
+        self.capacity = capacity
+        self._tables: dict[str, MaskTable] = {}
+        self._lock = threading.Lock()
+
+    def add(self, table: MaskTable) -> str:
+        """Keep ``table`` (dropping the least recently used beyond capacity); returns its digest."""
+        with self._lock:
+            self._tables.pop(table.digest, None)
+            self._tables[table.digest] = table
+            while len(self._tables) > self.capacity:
+                del self._tables[next(iter(self._tables))]
+        return table.digest
+
+    def get(self, digest) -> MaskTable:
+        """The table of ``digest``; ``InputError`` where none was uploaded (or it was dropped)."""
+        with self._lock:
+            table = self._tables.pop(digest, None) if isinstance(digest, str) else None
+            if table is None:
+                raise InputError(f"mask must name an uploaded mask (got {_brief(digest)}): upload the PNG again (POST /mask)")
+            self._tables[digest] = table  # most recently used
+            return table
+
+
+def mask_upload(body: bytes, store: MaskStore) -> dict:
+    """``POST /mask``: the table of the uploaded image, kept in ``store``; its digest, size and tables' URL."""
+    table = decode_mask(body, source="the uploaded file")
+    store.add(table)
+    height, width = table.shape
+    return {
+        "mask": table.digest,
+        "width": width,
+        "height": height,
+        "describe": table.describe(),
+        "table_url": f"/mask_table?mask={table.digest}",
+        "table_floats": int(table.gpu_table().size),
+    }
 
 
 def _feature_defaults() -> dict:
@@ -387,11 +450,13 @@ def viewer_config(scene_name: str = "cornell", size: tuple[int, int] = DEFAULT_S
             "blades": 7,
             "aspect": DEFAULT_SLIT_ASPECT,
             **_feature_defaults(),
+            "mask": None,
             "width": size[0],
             "height": size[1],
         },
         "exposure_ev": 0.0,
         "coc_divisor": COC_DIVISOR,
+        "mask_upload": {"url": "/mask", "max_bytes": MAX_BODY_BYTES, "max_side": MAX_MASK_SIDE},
         "fallback_command": f"bokehfit render --scene {scene_name} --out frame.png",
     }
 
@@ -412,13 +477,22 @@ def _query_int(query: dict, name: str, default=None) -> int | None:
     return int(value)
 
 
-def params_for_query(query: dict, scene_name: str = "cornell") -> dict:
+def _query_mask(query: dict, masks: MaskStore | None) -> MaskTable:
+    """The uploaded mask that ``mask`` names."""
+    values = query.get("mask")
+    if not values or values[-1] == "":
+        raise InputError("mask is required for shape 'mask': upload a PNG of transmission first")
+    return (masks or MaskStore()).get(values[-1])
+
+
+def params_for_query(query: dict, scene_name: str = "cornell", masks: MaskStore | None = None) -> dict:
     """``/params.json``: the uniform values, lens and depth of field for the page's settings.
 
     ``query`` maps names to lists of strings (as from :func:`urllib.parse.parse_qs`):
     shape, angle (degrees), fstop, focus (m), blades (ngon), aspect (slit), width, height,
     and the §3b features: roundness (n-gons), squeeze, rim, vignetting_radius with
-    vignetting_shift (both, or neither: no vignetting), chromatic_red with chromatic_blue.
+    vignetting_shift (both, or neither: no vignetting), chromatic_red with chromatic_blue,
+    and for shape ``mask`` the digest of a mask uploaded to ``masks``.
     """
     scene = build_scene(scene_name)
     shape = (query.get("shape") or ["circle"])[-1]
@@ -441,6 +515,7 @@ def params_for_query(query: dict, scene_name: str = "cornell") -> dict:
         roundness=_query_number(query, "roundness", 0.0) if spec is not None and spec.rounds else 0.0,
         squeeze=_query_number(query, "squeeze", 1.0),
         rim=_query_number(query, "rim", 0.0),
+        mask=_query_mask(query, masks) if spec is not None and spec.tabulated else None,
         **pairs,
     )
     width = _query_int(query, "width", DEFAULT_SIZE[0])
@@ -796,7 +871,7 @@ class _Handler(BaseHTTPRequestHandler):
         if len(digits) > 12 or int(digits) > MAX_BODY_BYTES:
             raise _Refused(HTTPStatus.REQUEST_ENTITY_TOO_LARGE, f"the body must be at most {MAX_BODY_BYTES >> 20} MiB")
         if int(digits) == 0:
-            raise _Refused(HTTPStatus.BAD_REQUEST, "the body is empty: send a `bokehfit compare --json` result")
+            raise _Refused(HTTPStatus.BAD_REQUEST, f"the body is empty: send {_POST_BODIES[urlsplit(self.path).path]}")
         return int(digits)
 
     def _read_body(self, length: int) -> bytes:
@@ -828,16 +903,22 @@ class _Handler(BaseHTTPRequestHandler):
             if url.path == "/config.json":
                 return self._json(HTTPStatus.OK, viewer_config(self.server.scene_name, self.server.size))
             if url.path == "/params.json":
-                return self._json(HTTPStatus.OK, params_for_query(parse_qs(url.query), self.server.scene_name))
+                return self._json(HTTPStatus.OK, params_for_query(parse_qs(url.query), self.server.scene_name, self.server.masks))
+            if url.path == "/mask_table":
+                table = self.server.masks.get((parse_qs(url.query).get("mask") or [None])[-1])
+                return self._send(HTTPStatus.OK, table.gpu_table().astype("<f4").tobytes(), "application/octet-stream")
             if url.path == "/favicon.ico":
                 return self._send(HTTPStatus.NO_CONTENT, b"", "image/x-icon")
         except InputError as error:
             return self._error(HTTPStatus.BAD_REQUEST, str(error))
         raise RuntimeError(f"route {url.path!r} is in _ROUTES but has no answer")
 
-    def _post(self, length: int) -> None:  # /matched, the one POST route
+    def _post(self, length: int) -> None:  # /matched and /mask
+        path = urlsplit(self.path).path
         body = self._read_body(length)
         try:
+            if path == "/mask":
+                return self._json(HTTPStatus.OK, mask_upload(body, self.server.masks))
             return self._json(HTTPStatus.OK, settings_from_compare(parse_json_body(body)))
         except InputError as error:
             return self._error(HTTPStatus.BAD_REQUEST, str(error))
@@ -858,6 +939,7 @@ class _HTTPServer(ThreadingHTTPServer):
         self.size = size
         self.verbose = verbose
         self.request_timeout_s = request_timeout_s
+        self.masks = MaskStore()
         self._slots = threading.BoundedSemaphore(MAX_CONNECTIONS)
         super().__init__(address, _Handler)
         port = self.server_address[1]

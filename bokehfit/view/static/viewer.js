@@ -7,7 +7,10 @@
 //                    padded size, WGSL declaration), entry point, workgroup size, bindings,
 //                    the scene for the sketch, the shapes and the slider ranges;
 //   /params.json     every RenderParams value for the current settings, filled by the
-//                    Python renderer's own code; this file only sets sample_index.
+//                    Python renderer's own code; this file only sets sample_index;
+//   /mask            (POST) an uploaded PNG becomes the custom mask aperture's table, built by
+//                    the same Python code as `bokehfit render --mask`; /mask_table?mask=DIGEST
+//                    is that table as float32, uploaded as it is into the mask_table binding.
 // The one shader written here is TONEMAP_WGSL below: a compute pass that tone-maps the
 // accumulation buffer (sum of samples in rgb, count in a) as `bokehfit render --out x.png`
 // does (scale by 2^EV, clip to [0, 1], sRGB) into 8-bit RGBA, which is read back and put on
@@ -147,14 +150,8 @@ class Renderer {
       size: bytes,
       usage: GPUBufferUsage.STORAGE | GPUBufferUsage.COPY_SRC | GPUBufferUsage.COPY_DST,
     });
-    const b = config.shader.bindings;
-    this.computeGroup = device.createBindGroup({
-      layout: this.compute.getBindGroupLayout(b.params.group),
-      entries: [
-        { binding: b.params.binding, resource: { buffer: this.uniform } },
-        { binding: b.accum.binding, resource: { buffer: this.accum } },
-      ],
-    });
+    // The mask's CDF tables: a single 0 until a mask is uploaded (the binding must exist).
+    this.setMaskTable(new Float32Array(1));
     this.rgba = device.createBuffer({ label: "rgba", size: 4 * width * height, usage: GPUBufferUsage.STORAGE | GPUBufferUsage.COPY_SRC });
     this.staging = device.createBuffer({ label: "staging", size: 4 * width * height, usage: GPUBufferUsage.MAP_READ | GPUBufferUsage.COPY_DST });
     this.tonemapGroup = device.createBindGroup({
@@ -165,6 +162,25 @@ class Renderer {
         { binding: 2, resource: { buffer: this.rgba } },
       ],
     });
+  }
+
+  // Upload a mask's tables (float32, as /mask_table serves them) and bind them with the rest.
+  setMaskTable(table) {
+    const { device } = this;
+    const b = this.config.shader.bindings;
+    if (table.byteLength > device.limits.maxStorageBufferBindingSize) {
+      throw new Error(`the mask's tables (${table.byteLength} bytes) exceed this adapter's storage binding`);
+    }
+    const buffer = device.createBuffer({ label: "mask_table", size: table.byteLength, usage: GPUBufferUsage.STORAGE | GPUBufferUsage.COPY_DST });
+    device.queue.writeBuffer(buffer, 0, table);
+    const entries = [
+      { binding: b.params.binding, resource: { buffer: this.uniform } },
+      { binding: b.accum.binding, resource: { buffer: this.accum } },
+    ];
+    if (b.mask_table) entries.push({ binding: b.mask_table.binding, resource: { buffer } });
+    this.computeGroup = device.createBindGroup({ layout: this.compute.getBindGroupLayout(b.params.group), entries });
+    if (this.maskTable) this.maskTable.destroy();
+    this.maskTable = buffer;
   }
 
   async checkCompilation(module, name) {
@@ -519,6 +535,7 @@ class Viewer {
     this.sizeNote = query.has("size") && !fits ? `size must be WxH, each ${lo} to ${hi} px (got ${query.get("size")}): using the default` : "";
     const maxSpp = parseInt(query.get("max_spp"), 10);
     this.maxSpp = maxSpp >= 1 ? maxSpp : DEFAULT_MAX_SPP;
+    this.maskName = null; // the uploaded mask's file name, for the render command
     this.shapes = Object.fromEntries(config.shapes.map((s) => [s.name, s]));
     this.state = this.initialState();
     this.info = null; // the last /params.json answer
@@ -539,7 +556,8 @@ class Viewer {
     const num = (key, fallback) => (query.has(key) && isFinite(parseFloat(query.get(key))) ? parseFloat(query.get(key)) : fallback);
     const shape = query.get("shape");
     return {
-      shape: shape && shape in this.shapes ? shape : d.shape,
+      // A mask shape needs an uploaded image first: it cannot come from the URL.
+      shape: shape && shape in this.shapes && !this.shapes[shape].tabulated ? shape : d.shape,
       angle_deg: num("angle", d.angle_deg),
       fstop: num("fstop", d.fstop),
       focus_distance_m: num("focus", d.focus_distance_m),
@@ -553,6 +571,7 @@ class Viewer {
       vignetting_shift: num("vignetting_shift", d.vignetting_shift),
       chromatic_red: num("chromatic_red", d.chromatic_red),
       chromatic_blue: num("chromatic_blue", d.chromatic_blue),
+      mask: d.mask,
     };
   }
 
@@ -602,6 +621,7 @@ class Viewer {
     if (spec.takes_blades) q.set("blades", String(s.blades));
     if (spec.takes_aspect) q.set("aspect", String(s.aspect));
     if (spec.rounds) q.set("roundness", String(s.roundness));
+    if (spec.tabulated) q.set("mask", s.mask);
     q.set("squeeze", String(s.squeeze));
     q.set("rim", String(s.rim));
     if (s.vignetting) {
@@ -780,6 +800,7 @@ class Viewer {
     });
 
     $("matched-file").addEventListener("change", () => this.loadMatched());
+    $("mask-file").addEventListener("change", () => this.loadMask());
     $("save-png").addEventListener("click", () => this.savePNG());
     $("reset").addEventListener("click", () => {
       for (const key of Object.keys(this.state)) this.state[key] = this.config.defaults[key];
@@ -791,6 +812,7 @@ class Viewer {
   syncControls() {
     const s = this.state;
     const spec = this.shapes[s.shape];
+    for (const option of $("shape").options) option.disabled = this.shapes[option.value].tabulated && !s.mask;
     $("shape").value = s.shape;
     $("angle").value = String(s.angle_deg);
     $("angle").disabled = !spec.has_angle;
@@ -858,6 +880,32 @@ class Viewer {
     }
   }
 
+  // --- the custom mask aperture from a PNG: the server builds its table, the GPU gets it
+
+  async loadMask() {
+    const file = $("mask-file").files[0];
+    if (!file) return;
+    try {
+      const body = await file.arrayBuffer();
+      const m = await fetchJSON(this.config.mask_upload.url, { method: "POST", headers: { "Content-Type": "image/png" }, body });
+      const response = await fetch(m.table_url);
+      if (!response.ok) throw new Error(`${m.table_url}: HTTP ${response.status}`);
+      const table = new Float32Array(await response.arrayBuffer());
+      if (table.length !== m.table_floats) throw new Error(`the mask's tables have ${table.length} values, not ${m.table_floats}`);
+      // The tables first: the shader reads them only once the uniform says shape mask.
+      if (this.renderer) this.renderer.setMaskTable(table);
+      this.state.mask = m.mask;
+      this.state.shape = "mask";
+      this.maskName = file.name;
+      await this.apply();
+      this.showMessage(`Mask from ${file.name}: ${m.describe}`);
+    } catch (error) {
+      this.showMessage(`${file.name}: ${error.message}`, true);
+    } finally {
+      $("mask-file").value = "";
+    }
+  }
+
   // --- save the render as PNG, the settings in tEXt chunks and the file name
 
   settingsRecord() {
@@ -876,6 +924,7 @@ class Viewer {
         ` --angle ${this.info.lens.angle_deg} --fstop ${this.info.lens.fstop}` +
         ` --focus-distance ${this.info.lens.focus_distance_m}` +
         this.info.shape_flags +
+        (this.shapes[this.state.shape].tabulated ? ` --mask ${this.maskName}` : "") +
         this.featureFlags() +
         ` --spp ${this.spp} --size ${this.width}x${this.height} --out frame.png`,
     };
