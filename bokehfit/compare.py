@@ -68,6 +68,10 @@ MIN_ACCEPTABLE_IOU = 0.6
 #: ... and sure when, besides a clear BIC margin, they match this well with at least MIN_SURE_DISCS discs.
 MIN_SURE_IOU = 0.85
 MIN_SURE_DISCS = 3
+#: ... and the discs' outlines follow the shape: median radial misfit (in equal-area radii) at most this.
+#: Bokeh discs of a real lens show 0.01–0.05 (noise, JPEG, a little bloom); out-of-focus petals,
+#: leaves and merged glows 0.1 and more.
+MAX_SURE_OUTLINE_MISFIT = 0.08
 #: The kernel is drawn at the fitted angle, so each disc's best alignment with
 #: it is searched within this many degrees.
 ALIGNMENT_SEARCH_DEG = 10.0
@@ -683,6 +687,9 @@ def judge(fit: ApertureFit, metrics: dict[str, float | None]) -> tuple[list[str]
     if not fit.sure:
         doubts.append(f"the runner-up ({fit.runner_up.family.aperture.display_name}) fits almost as well")
     doubts.extend(fit.notes)
+    if fit.outline_misfit > MAX_SURE_OUTLINE_MISFIT:
+        doubts.append(f"the discs' outlines are irregular (median misfit {fit.outline_misfit:.2f} of their radius to the "
+                      f"best shape, {MAX_SURE_OUTLINE_MISFIT} for a sure fit): blobs that say little about the aperture")
     fitted = len(fit.disc_fits)
     if fitted < MIN_SURE_DISCS:
         doubts.append(f"only {fitted} disc{' was' if fitted == 1 else 's were'} clean enough to fit")

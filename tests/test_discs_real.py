@@ -87,7 +87,7 @@ def test_saturated_disc_is_kept_as_edge_evidence():
     assert hot is not None and math.hypot(hot.center_xy[0] - 90.3, hot.center_xy[1] - 100.6) <= CENTRE_TOL_PX
     assert drawn_diameter(70) <= hot.diameter_px <= drawn_diameter(70) + 2.0 * CLIP_SHIFT_SIGMA * blur, hot.diameter_px
     assert hot.saturated and hot.evidence == "edge" and hot.clipped_share > 0.8
-    assert hot.outline_seen >= FULL_OUTLINE_SEEN and hot.shape_usable and not hot.usable
+    assert hot.outline_seen >= FULL_OUTLINE_SEEN and hot.shape_usable and hot.usable  # fitted by its edge
     assert_measured(clean, (215.2, 98.9), 60)
     assert not clean.saturated and clean.evidence == "plateau" and clean.clipped_share == 0.0 and clean.usable
 

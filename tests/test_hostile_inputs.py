@@ -140,7 +140,7 @@ def test_float_tiff_nan_and_inf_pixels_are_masked_and_counted(tmp_path):
     search = find_discs(photo.luminance, photo.clipped)
     by_centre = {(round(d.center_xy[0]), round(d.center_xy[1])): d for d in search.discs}
     assert set(by_centre) == {(x, y) for x, y, _ in DISCS}
-    assert not by_centre[(60, 60)].usable and by_centre[(60, 60)].saturated
+    assert by_centre[(60, 60)].saturated and by_centre[(60, 60)].evidence == "edge"
     assert by_centre[(160, 70)].usable and by_centre[(100, 150)].usable
 
 

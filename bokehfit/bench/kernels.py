@@ -98,6 +98,16 @@ class Variant:
 #: What is measured: ``raster`` is always stratified inside each pixel, ``exact`` draws no samples.
 VARIANTS = (Variant("exact", None), Variant("mc", "independent"), Variant("mc", "stratified"), Variant("raster", None))
 SHAPES = ("circle", "hexagon", "star")
+def _bench_mask(side: int = 48) -> np.ndarray:
+    """A custom mask made by geometry (read-only): a clear ring around a half-grey disc crossed by an opaque bar."""
+    yy, xx = (np.mgrid[0:side, 0:side] + 0.5 - side / 2) / (side / 2)
+    r = np.hypot(xx, yy)
+    mask = np.where(r <= 1.0, np.where(r >= 0.7, 1.0, 0.5), 0.0)
+    mask[np.abs(yy) < 0.08] = 0.0
+    mask.flags.writeable = False
+    return mask
+
+
 #: One aperture per §3b feature: name → (make_aperture keywords, field position or None).
 FEATURE_CASES = {
     "rounded": (dict(shape="ngon", blades=9, roundness=0.5), None),
@@ -105,6 +115,7 @@ FEATURE_CASES = {
     "vignetted": (dict(shape="hexagon", vignetting={"radius": 1.1, "shift": 1.0}), (0.7, 0.4)),
     "rim": (dict(shape="hexagon", rim=0.6), None),
     "chromatic": (dict(shape="hexagon", chromatic={"red": 0.05, "blue": -0.04}), None),
+    "mask": (dict(shape="mask", mask=_bench_mask()), None),
 }
 #: Everything ``bokehfit bench`` renders: the plain shapes, then the feature cases.
 BENCH_APERTURES = SHAPES + tuple(FEATURE_CASES)

@@ -44,7 +44,7 @@ from bokehfit.apertures import Aperture
 from bokehfit.discs import USABLE_EVIDENCE, Disc
 from bokehfit.errors import InputError
 from bokehfit.fit.families import FAMILIES, Family, families_for
-from bokehfit.fit.pixels import PixelFit, crop_disc, fit_discs
+from bokehfit.fit.pixels import FIT_BOUNDS, DiscCrop, PixelFit, crop_disc, fit_discs, render_disc_model
 from bokehfit.fit.result import FailedFit, FitFailedError, FitOptions, Parameter
 from bokehfit.fit.signature import Screen, screen
 
@@ -89,7 +89,17 @@ class CandidateModel:
     angle_deg: float | None
     angle_uncertainty_deg: float | None
     diameter_px: float
-    screen_rms: float  #: mean outline misfit in equal-area radii
+    screen_rms: float  #: median outline misfit over the discs, in equal-area radii
+    roundness: float | None = None  #: median fitted roundness over the discs (families that fit it)
+
+    def same_answer(self, other: CandidateModel) -> bool:
+        """Whether ``other`` says what this model says: the same shape straight or rounded, or, beside
+        the circle, blades so rounded that they are round too (roundness ≥ ROUND_ENOUGH)."""
+        if other.family.base == self.family.base:
+            return True
+        rounds = [m for m in (self, other) if m.roundness is not None]
+        circles = [m for m in (self, other) if m.family.aperture.is_circle]
+        return len(rounds) == 1 and len(circles) == 1 and rounds[0].roundness >= ROUND_ENOUGH
 
     def to_json(self) -> dict:
         return {
@@ -151,9 +161,15 @@ class ApertureFit:
         return self.candidates[0].family
 
     @property
+    def outline_misfit(self) -> float:
+        """Median over the used discs of their outlines' misfit to the winning shape (equal-area radii):
+        about 0.01–0.05 for discs that show an aperture, 0.1 and more for blobs that show none."""
+        return self.candidates[0].screen_rms if self.candidates else math.nan
+
+    @property
     def runner_up(self) -> CandidateModel | None:
-        """The best model of another shape (the winner rounded or straight is the same shape); None if none."""
-        return next((m for m in self.candidates[1:] if m.family.base != self.family.base), None)
+        """The best model that gives another answer (:meth:`CandidateModel.same_answer`); None if none."""
+        return next((m for m in self.candidates[1:] if not self.candidates[0].same_answer(m)), None)
 
     @property
     def margin_bic(self) -> float | None:
@@ -225,6 +241,12 @@ class ApertureFit:
 LENS_FEATURES = ("roundness", "squeeze", "vignetting", "rim", "chromatic")
 #: JSON names of uncertainties that schema 1 named before the ``<name>_uncertainty`` rule (design.md §7, §7b).
 UNCERTAINTY_KEYS = {"angle_deg": "angle_uncertainty_deg", "diameter_px": "diameter_uncertainty_px"}
+#: Blades this round (roundness) give the same answer as the circle: round discs.
+ROUND_ENOUGH = 0.8
+#: A rounded family is fitted where its screen misfit is under this share of the straight one's on some disc ...
+ROUNDER_SCREEN = 0.95
+#: ... of at least this diameter (px): a smaller disc cannot show how round its blades are.
+ROUNDNESS_MIN_DIAMETER_PX = 16.0
 #: A §3b feature joins the model when it lowers the joint BIC by at least this (Kass & Raftery: "very strong").
 FEATURE_DELTA_BIC = 10.0
 #: An elongated aperture (a slit) is accepted only when at least this many discs show it ...
@@ -233,6 +255,8 @@ MIN_ELONGATED_DISCS = 3
 ELONGATED_ANGLE_SPREAD_DEG = 10.0
 #: ... and aspects within this spread (the aspects' standard deviation).
 ELONGATED_ASPECT_SPREAD = 0.1
+#: A shape with an angle is supported only where the discs' angles spread less than this share of its symmetry.
+ANGLE_AGREEMENT_SHARE = 0.125
 #: Vignetting is tried only when some fitted disc lies at least this far from the centre (half-diagonals) ...
 VIGNETTING_MIN_FIELD = 0.45
 #: ... and those discs' outlines misfit the shape at least this many times as much as the central ones'.
@@ -241,6 +265,10 @@ VIGNETTING_MISFIT_RATIO = 1.5
 #: image centre, cutting a disc's outer side), and a radius that cuts the farthest disc this far inside its R0.
 VIGNETTING_START_SHIFT = -1.0
 VIGNETTING_START_CUT = 0.85
+#: The rim is tried where discs of at least this diameter (px; smaller ones show no profile) ...
+RIM_MIN_DIAMETER_PX = 20.0
+#: ... leave their rims brighter or darker than their centres under the flat model by this share of the contrast.
+RIM_SIGNAL = 0.04
 #: Least |rim| reported: a smaller one changes a disc's profile by under 5 % (below what a photo's discs show).
 MIN_RIM = 0.05
 #: Most discs fitted jointly (the clearest first): the shared parameters are settled well before.
@@ -303,7 +331,9 @@ def _combine(family: Family, fits: list[PixelFit], screens: list[Screen]) -> Can
         angle_deg=angle,
         angle_uncertainty_deg=uncertainty,
         diameter_px=float(np.median(diameters)),
-        screen_rms=float(np.mean([s.rms for s in screens])),
+        screen_rms=float(np.median([s.rms for s in screens])),
+        roundness=(float(np.median([f.aperture.roundness for f in fits]))
+                   if "roundness" in family.aperture.parameters else None),
     )
 
 
@@ -351,6 +381,22 @@ def _unturned_angles(family: Family, fits: list[PixelFit], turned: list[bool]) -
     return np.array([f.angle_deg - (half if t else 0.0) for f, t in zip(fits, turned)]) % family.aperture.symmetry_deg
 
 
+def _unsupported(family: Family, fits: list[PixelFit]) -> str | None:
+    """Why the discs do not support ``family`` together (None when they do): an elongation they do
+    not share (:func:`_elongation_doubt`), or angles that scatter (robust spread over
+    ANGLE_AGREEMENT_SHARE of the symmetry, at least MIN_ANGLE_TOLERANCE_DEG) with two discs or more."""
+    doubt = _elongation_doubt(family, fits)
+    if doubt is not None or not family.aperture.has_angle or len(fits) < 2:
+        return doubt
+    period = family.aperture.symmetry_deg
+    angles = _unturned_angles(family, fits, _turned(family, fits))
+    mean, _ = _circular_mean(angles, np.ones(len(angles)), period)
+    spread = 1.4826 * float(np.median(np.abs(_angle_offsets(angles, mean, period))))
+    if spread > max(ANGLE_AGREEMENT_SHARE * period, MIN_ANGLE_TOLERANCE_DEG):
+        return f"the discs put its angle in different places (spread {spread:.0f}° of its {period:.0f}° symmetry)"
+    return None
+
+
 def _disagreeing(family: Family, fits: list[PixelFit], screens: list[Screen], turned: list[bool]) -> dict[int, str]:
     """Discs (by position in ``fits``) whose shape or angle the others' consensus does not share, with the reason."""
     out: dict[int, str] = {}
@@ -390,6 +436,23 @@ def _consensus_start(family: Family, fits: list[PixelFit], turned: list[bool]) -
     return family.aperture.replace(**values) if values else family.aperture
 
 
+def _at_bound(aperture: Aperture, feature: str) -> bool:
+    """Whether a feature's fitted value sits at the end of its search range: the discs pushed it
+    there to absorb something else (a misfit shape, the surround), not to describe the lens."""
+    parameters = aperture.parameters
+    values = aperture.values
+    for name in parameters:
+        if not name.startswith(feature):
+            continue
+        low, high = FIT_BOUNDS.get(name, parameters[name].bounds)
+        span = high - low
+        if name != "vignetting_radius" and min(values[name] - low, high - values[name]) < 0.01 * span:
+            return True
+        if name == "vignetting_radius" and high - values[name] < 0.01 * span:
+            return True  # a barrel at the largest radius cuts nothing the start did not
+    return False
+
+
 def _fit_start(aperture: Aperture) -> Aperture:
     """The pixel fit's start from a screen's aperture: a rounded one a little off its straight bound."""
     if "roundness" in aperture.parameters:
@@ -411,11 +474,32 @@ def _add_feature(aperture: Aperture, feature: str, fits: list[PixelFit]) -> Aper
     return aperture.with_features(feature)
 
 
-def _feature_tests(fits: list[PixelFit], discs: list[Disc], screens: list[Screen]) -> tuple[str, ...]:
-    """The §3b features worth testing on these discs: the rim where some disc is a ring (a bright rim);
-    the vignetting where at least 3 discs were fitted, some lie far enough from the centre to be cut
-    (VIGNETTING_MIN_FIELD), and those misfit the shape more than the central ones do (or none is central)."""
-    features = ["rim"] if any(d.ring for d in discs) else []
+def _rim_signal(crop: DiscCrop, fit: PixelFit) -> float | None:
+    """How much brighter the flat model leaves a disc's rim than its centre, over its contrast
+    (None for a saturated disc, whose profile is clipped, or one too small to have a centre)."""
+    if crop.censored is not None or fit.diameter_px / crop.factor < RIM_MIN_DIAMETER_PX / 2:
+        return None
+    values = crop.values_of(fit)
+    model, background, plateau = render_disc_model(fit.aperture, values, crop.size, crop.data, crop.field_position)
+    rows, cols = np.indices((crop.size, crop.size))
+    radius = np.hypot(cols - values["cx"], rows - values["cy"]).ravel() / (0.5 * values["diameter_px"])
+    residual = crop.data - model
+    inner, rim = residual[radius < 0.5], residual[(radius > 0.65) & (radius < 0.9)]
+    contrast = plateau - background
+    if not len(inner) or not len(rim) or abs(contrast) < 1e-12:
+        return None
+    return float((rim.mean() - inner.mean()) / contrast)
+
+
+def _feature_tests(fits: list[PixelFit], discs: list[Disc], screens: list[Screen], crops: list[DiscCrop]) -> tuple[str, ...]:
+    """The §3b features worth testing on these discs: the rim where some disc is a ring (a bright rim)
+    or the flat model leaves the discs' rims brighter or darker than their centres (RIM_SIGNAL of the
+    contrast, median over the discs that show a profile); the vignetting where at least 3 discs were
+    fitted, some lie far enough from the centre to be cut (VIGNETTING_MIN_FIELD), and those misfit
+    the shape more than the central ones do (or none is central)."""
+    signals = [v for v in (_rim_signal(c, f) for c, f in zip(crops, fits)) if v is not None]
+    profiled = bool(signals) and abs(float(np.median(signals))) >= RIM_SIGNAL
+    features = ["rim"] if profiled or any(d.ring for d in discs) else []
     field = np.array([math.hypot(*f.field_position) for f in fits])
     rms = np.array([s.rms for s in screens])
     outer, inner = rms[field >= VIGNETTING_MIN_FIELD], rms[field < VIGNETTING_MIN_FIELD]
@@ -496,9 +580,16 @@ def fit_aperture(
     shortlist = sorted(families, key=lambda f: best_rms[f])[: options.shortlist]
     if FAMILIES[0] in families and FAMILIES[0] not in shortlist:
         shortlist.append(FAMILIES[0])  # the simplest model is always a candidate
-    # Each shortlisted n-gon is fitted straight and with its blades' roundness free: a
-    # straight polygon and the circle are the ends, the BIC says whether the discs need it.
-    candidates = [g for f in shortlist for g in (f, rounded_of.get(f)) if g is not None]
+    # Each shortlisted n-gon is fitted straight and, where the screen finds its outline rounder
+    # than the straight blades on some of the discs that choose the model, with its roundness free:
+    # a straight polygon and the circle are the ends, the BIC says whether the discs need it.
+    def rounder(family: Family) -> bool:
+        return any(found[rounded_of[family]].rms < ROUNDER_SCREEN * found[family].rms
+                   for disc, found in zip(chosen[: options.model_discs], screens_of)
+                   if disc.diameter_px >= ROUNDNESS_MIN_DIAMETER_PX)
+
+    candidates = [g for f in shortlist for g in (f, rounded_of.get(f) if f in rounded_of and rounder(f) else None)
+                  if g is not None]
 
     # Model selection on the first model_discs discs, then the winner on all of them.
     model_discs = options.model_discs
@@ -513,14 +604,17 @@ def fit_aperture(
         for family in candidates
     ]
     models.sort(key=lambda m: m.bic)
+    # The best model the discs support together: one aperture shows the same angle (and the same
+    # elongation) on every disc; a shape whose angle each disc puts elsewhere is a misfit, not a lens.
     notes = []
     winner = models[0].family
-    doubt = _elongation_doubt(winner, [item.fits[winner.name] for item in disc_fits])
-    if doubt is not None:
-        others = [m for m in models if "aspect" not in m.family.aperture.parameters]
-        if others:
-            notes.append(f"not {winner.aperture.display_name}: {doubt}")
-            winner = others[0].family
+    for model in models:
+        doubt = _unsupported(model.family, [item.fits[model.family.name] for item in disc_fits])
+        if doubt is None:
+            winner = model.family
+            break
+        if not notes or model is models[0]:
+            notes.append(f"not a {model.family.aperture.display_name}: {doubt}")
     for i, (disc, crop, disc_screens, found) in enumerate(
         zip(chosen[model_discs:], crops[model_discs:], screened[model_discs:], screens_of[model_discs:]), model_discs
     ):
@@ -547,13 +641,29 @@ def fit_aperture(
     joint = fit_discs(joint_crops, winner, aperture, noise=noise, disc_starts=disc_starts)
     feature_tests: dict[str, float] = {}
     for feature in _feature_tests([winner_fits[i] for i in joint_ids], [chosen[i] for i in joint_ids],
-                                  [winner_screens[i] for i in joint_ids]):
+                                  [winner_screens[i] for i in joint_ids], joint_crops):
         trial = fit_discs(joint_crops, winner, _add_feature(joint.aperture, feature, joint.fits), noise=noise,
                           disc_starts=[crops[i].values_of(f) for i, f in zip(joint_ids, joint.fits)])
         feature_tests[feature] = joint.bic - trial.bic
         visible = feature != "rim" or abs(trial.aperture.rim) >= MIN_RIM
-        if feature_tests[feature] >= FEATURE_DELTA_BIC and visible:
+        if feature_tests[feature] >= FEATURE_DELTA_BIC and visible and not _at_bound(trial.aperture, feature):
             joint = trial
+    # With a feature on, the shape is chosen again between the winner and the simplest model:
+    # a cat-eye cut makes round discs look like a rounded triangle until the cut is in the model.
+    added = [f for f in feature_tests if f in joint.aperture.enabled_features]
+    simplest = FAMILIES[0]
+    if added and simplest in families and winner.base != simplest:
+        start_values = {n: v for n, v in joint.aperture.values.items() if any(n.startswith(f) for f in added)}
+        plain = simplest.aperture.with_features(*added).replace(**start_values)
+        untouched = [dataclasses.replace(c, turned=False) for c in joint_crops]
+        trial = fit_discs(untouched, simplest, plain, noise=noise,
+                          disc_starts=[crops[i].values_of(f) for i, f in zip(joint_ids, joint.fits)])
+        if trial.bic <= joint.bic:
+            notes.append(f"with the {' and the '.join(added)} in the model, the {simplest.aperture.display_name} explains "
+                         f"the discs better than the {winner.aperture.display_name} chosen without (ΔBIC {joint.bic - trial.bic:.0f})")
+            winner, joint, turned = simplest, trial, [False] * len(turned)
+            winner_screens = [found[winner] for found in screens_of]
+            crops = [dataclasses.replace(c, turned=False) for c in crops]
     seen_aperture = joint.aperture
     # The discs left out of the joint fit (beyond JOINT_DISCS) are refitted with the joint aperture fixed.
     final = dict(zip(joint_ids, joint.fits))
@@ -564,6 +674,8 @@ def fit_aperture(
 
     best_bic = models[0].bic
     winner_model = _combine(winner, [final[i] for i in kept], [winner_screens[i] for i in kept])
+    if winner_model.angle_deg is not None:  # every disc shares the joint aperture: its angle, not a mean of copies
+        winner_model = dataclasses.replace(winner_model, angle_deg=joint.aperture.canonical_angle_deg)
     models = [
         dataclasses.replace(winner_model if m.family is winner else m, bic=m.bic, delta_bic=m.bic - best_bic)
         for m in models
@@ -571,7 +683,7 @@ def fit_aperture(
     models.sort(key=lambda m: (m.family is not winner, m.bic))
     # The runner-up is the best other shape (the winner straight or rounded is the same shape: its
     # roundness and that value's uncertainty say how round the blades are).
-    runner_up = next((m for m in models[1:] if m.family.base != winner.base), None)
+    runner_up = next((m for m in models[1:] if not models[0].same_answer(m)), None)
     margin = runner_up.bic - models[0].bic if runner_up is not None else math.inf
     selection_discs = min(len(disc_fits), model_discs)
     # Unsure only where the runner-up fits about as well; a nested model that
@@ -581,10 +693,13 @@ def fit_aperture(
     best_rss = sum(item.fits[winner.name].rss for item in disc_fits[:selection_discs])
     sure = (margin >= options.sure_delta_bic_per_disc * selection_discs or runner_up_rss >= best_rss) and not notes
     best_fits = [final[i] for i in kept]
-    diameters = np.array([f.diameter_px for f in best_fits])
+    # The size from the discs that show their whole profile where there are any: a saturated
+    # disc's edge pixels above the clip read as lower bounds, so its size is known to about a pixel.
+    sized = [f for f in best_fits if not f.censored] or best_fits
+    diameters = np.array([f.diameter_px for f in sized])
     # The median's uncertainty: the spread between discs (over √n) with each fit's own.
     spread = 1.4826 * float(np.median(np.abs(diameters - np.median(diameters)))) / math.sqrt(len(diameters))
-    own = float(np.median([f.uncertainty.get("diameter_px", 0.0) for f in best_fits]))
+    own = float(np.median([f.uncertainty.get("diameter_px", 0.0) for f in sized]))
     spread = math.hypot(spread, own if math.isfinite(own) else 0.0)
     angle_uncertainty = winner_model.angle_uncertainty_deg
     if angle_uncertainty is not None and math.isfinite(joint.uncertainty.get("angle_deg", math.nan)):

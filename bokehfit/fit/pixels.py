@@ -69,6 +69,9 @@ __all__ = [
 MAX_FIT_SIDE = 36
 #: Most function evaluations per fit.
 MAX_EVALUATIONS = 200
+#: Relative change of the cost and of the parameters at which a fit stops (scipy's ftol and xtol):
+#: 1e-6 of an angle of 30° is 3e-5°, far below what the discs can tell.
+TOLERANCE = 1e-6
 #: Widest slit fitted: at aspect 1 the slit is the square, which has a model of its own.
 MAX_SLIT_ASPECT = 0.8
 #: Edge-blur bounds, crop pixels.
@@ -432,6 +435,8 @@ def fit_discs(
         x_scale="jac",
         max_nfev=MAX_EVALUATIONS,
         diff_step=1e-4,
+        ftol=TOLERANCE,
+        xtol=TOLERANCE,
         jac_sparsity=sparsity,
         tr_solver="exact" if sparsity is None else "lsmr",
     )

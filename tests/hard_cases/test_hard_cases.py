@@ -152,10 +152,23 @@ def test_two_discs_overlapping_by_90_percent():
 
 
 def test_saturated_flat_topped_disc():
-    image = render_discs(160, 160, [SyntheticDisc((80.3, 79.8), 70.0, "pentagon", 8.0, brightness=5.0)], noise_sigma=0.002)
+    """Five times over the clip: the plateau is gone, the outline is not. The disc is used by its edge,
+    its clipped pixels fitted as lower bounds, and gives the shape, the angle and the size."""
+    from bokehfit.fit import fit_aperture
+
+    image = np.minimum(render_discs(160, 160, [SyntheticDisc((80.3, 79.8), 70.0, "pentagon", 8.0, brightness=5.0)],
+                                    noise_sigma=0.002), 1.0)
     search = find_discs(image, image >= 1.0)
-    assert len(search.discs) == 1 and search.discs[0].saturated and not search.discs[0].usable
+    assert len(search.discs) == 1 and search.discs[0].saturated and search.discs[0].usable
+    assert search.discs[0].evidence == "edge"
     assert search.discs[0].diameter_px == pytest.approx(70.0, rel=0.05)
+    fit = fit_aperture(image, search.discs, clipped=image >= 1.0)
+    assert fit.family.base.name == "pentagon", fit.message
+    fitted = fit.disc_fits[0].fits[fit.family.name]
+    assert fitted.censored > 100 and fitted.plateau > 1.0  # (pixels of the reduced crop)
+    assert min((fit.aperture.angle_deg - 8.0) % 72.0, (8.0 - fit.aperture.angle_deg) % 72.0) < 1.0
+    # Its edge pixels above a fifth of the plateau read as clipped: the size is known to about a pixel.
+    assert fitted.diameter_px == pytest.approx(70.0, abs=2.5)
 
 
 def test_a_4_px_disc_is_found_but_too_small_to_fit():
