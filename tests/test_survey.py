@@ -276,6 +276,72 @@ def test_a_killed_worker_process_is_replaced_and_the_survey_completes(tmp_path, 
 # --------------------------------------------------------------------------------------
 
 
+class _PoolThatBreaks:
+    """A stand-in for the local engine whose worker "dies" while it holds its second photo.
+
+    Its first photo comes back; the second fails with the pool, and from then on the
+    pool refuses new work with ``BrokenProcessPool``, as
+    :class:`concurrent.futures.ProcessPoolExecutor` does. This makes the race of the
+    test above (a worker dying between a result and the next submit) deterministic.
+    """
+
+    def __init__(self, jobs, adapter):
+        self.workers, self.pools, self.submitted = jobs, 1, 0
+
+    def submit(self, task):
+        import concurrent.futures
+        from concurrent.futures.process import BrokenProcessPool
+
+        from bokehfit.survey.run import _failure
+
+        n, self.submitted = self.submitted, self.submitted + 1
+        if self.pools == 1 and n >= 2:
+            raise BrokenProcessPool("A child process terminated abruptly")
+        future = concurrent.futures.Future()
+        if self.pools == 1 and n == 1:
+            future.set_exception(BrokenProcessPool("A child process terminated abruptly"))
+        else:
+            future.set_result(_failure(task, "no_discs", f"stand-in result from pool {self.pools}"))
+        return future
+
+    def wait(self, futures):
+        return {next(iter(futures))}  # one at a time, oldest first
+
+    def broken(self, error):
+        from concurrent.futures.process import BrokenProcessPool
+
+        return isinstance(error, BrokenProcessPool)
+
+    def restart(self):
+        self.pools += 1
+
+    def close(self, interrupted):
+        pass
+
+
+def test_a_pool_broken_between_a_result_and_the_next_submit_is_restarted(tmp_path, monkeypatch):
+    from bokehfit.survey import run as survey_run
+    from bokehfit.survey.store import SurveyStore
+
+    photos = []
+    for k in range(4):
+        photos.append(tmp_path / f"p{k}.png")
+        photos[-1].write_bytes(f"photo {k}".encode())
+    engines = []
+
+    def engine(jobs, adapter):
+        engines.append(_PoolThatBreaks(jobs, adapter))
+        return engines[-1]
+
+    monkeypatch.setattr(survey_run, "_LocalEngine", engine)
+    with SurveyStore(tmp_path / "s.duckdb") as store:
+        run = survey_run.run_survey(photos, store, jobs=1, html=False, progress=False)
+    assert run.done == 4 and run.statuses == {"no_discs": 4}, run.summary()
+    assert engines[0].pools == 2, "the broken pool was not replaced"
+    reasons = {name: row["reason"] for name, row in rows(tmp_path / "s.duckdb").items()}
+    assert reasons == {"p0.png": "stand-in result from pool 1", **{f"p{k}.png": "stand-in result from pool 2" for k in (1, 2, 3)}}
+
+
 def test_dask_local_cluster_gives_the_same_rows(surveyed, tmp_path):
     from distributed import LocalCluster
 

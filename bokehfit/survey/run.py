@@ -147,12 +147,13 @@ class _LocalEngine:
         done, _ = concurrent.futures.wait(futures, return_when=concurrent.futures.FIRST_COMPLETED)
         return done
 
-    def crashed(self, error: BaseException) -> bool:
-        if isinstance(error, concurrent.futures.process.BrokenProcessPool):
-            self.pool.shutdown(wait=False, cancel_futures=True)
-            self.pool = self._new_pool()
-            return True
-        return False
+    def broken(self, error: BaseException) -> bool:
+        """Whether ``error`` says a worker process died and took the pool with it."""
+        return isinstance(error, concurrent.futures.process.BrokenProcessPool)
+
+    def restart(self) -> None:
+        self.pool.shutdown(wait=False, cancel_futures=True)
+        self.pool = self._new_pool()
 
     def close(self, interrupted: bool) -> None:
         self.pool.shutdown(wait=not interrupted, cancel_futures=True)
@@ -181,8 +182,11 @@ class _DaskEngine:
     def wait(self, futures):
         return self.distributed.wait(list(futures), return_when="FIRST_COMPLETED").done
 
-    def crashed(self, error: BaseException) -> bool:
+    def broken(self, error: BaseException) -> bool:
         return False  # Dask reschedules a lost worker's tasks itself; KilledWorker ends up as an error row
+
+    def restart(self) -> None:
+        raise AssertionError("a Dask cluster is never restarted by the survey")
 
     def close(self, interrupted: bool) -> None:
         if self.own_client:
@@ -252,13 +256,24 @@ def run_survey(
         while waiting or in_flight:
             while waiting and len(in_flight) < IN_FLIGHT_PER_WORKER * engine.workers:
                 task = waiting.popleft()
-                in_flight[engine.submit(task)] = task
+                try:
+                    in_flight[engine.submit(task)] = task
+                except Exception as error:
+                    if not engine.broken(error):
+                        raise
+                    # a worker died since the last result: the pool refuses new work, and the
+                    # photos it holds fail with it below; with none held, start a new pool now
+                    waiting.appendleft(task)
+                    if in_flight:
+                        break
+                    engine.restart()
             for future in engine.wait(in_flight):
                 task = in_flight.pop(future)
                 try:
                     record = future.result()
                 except Exception as error:  # the worker, not the photo, failed
-                    if engine.crashed(error):
+                    if engine.broken(error):
+                        engine.restart()
                         # every task of the broken pool failed with it: those that ran may be the cause
                         for other in [task, *in_flight.values()]:
                             crashes[other.sha256] += 1
