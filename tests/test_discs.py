@@ -229,3 +229,138 @@ def test_discs_survive_a_raw_round_trip(tmp_path):
     recall, precision, matched = score(search.discs, truth)
     assert recall == 1.0 and precision == 1.0, (recall, precision, search.rejected)
     assert_accurate(matched, DIAMETER_TOL_REL, 0.5, 0.5)
+
+
+# --------------------------------------------------------------------------------------
+# Work done in parts or by shortcuts gives the same numbers as done whole
+# --------------------------------------------------------------------------------------
+
+
+def strip_scene():
+    """Discs of 5 to 150 px (one pair overlapping), a diagonal streak and a large faint disc on a
+    gradient with noise: blobs of every band that cross the borders of strips a few rows tall."""
+    truth = [
+        SyntheticDisc((60.4, 50.2), 6, "circle"),
+        SyntheticDisc((150.7, 95.3), 9, "hexagon", brightness=0.4),
+        SyntheticDisc((260.2, 140.6), 22, "pentagon", angle_deg=12),
+        SyntheticDisc((120.5, 230.1), 60, "circle", brightness=0.5),
+        SyntheticDisc((160.2, 236.4), 60, "circle", brightness=0.7),
+        SyntheticDisc((330.3, 300.8), 150, "hexagon", brightness=0.08),
+        SyntheticDisc((70.1, 380.9), 35, "star", angle_deg=40),
+    ]
+    image = render_discs(420, 460, truth, background=gradient(420, 460, 0.02, 0.05), noise_sigma=0.003, seed=4)
+    rows, cols = np.indices(image.shape)
+    image[np.abs(rows - 1.05 * cols - 20) < 1.2] += 0.3  # a thin streak across the frame
+    # A small disc just below row 152 (a border of 76-row strips) with a one-pixel thread off its
+    # edge at 45°, up across the border: joined to the disc only through diagonal neighbours.
+    image = np.maximum(image, render_discs(420, 460, [SyntheticDisc((200.3, 160.2), 8, "circle", brightness=0.8)]))
+    for k in range(-2, 30):
+        image[156 - k, 196 - k] += 0.2
+    return image
+
+
+def test_candidates_do_not_depend_on_the_strips(monkeypatch):
+    """Bands are searched in strips of rows (the opening with a margin of its reach, blobs
+    joined across the borders): in strips as thin as they go, the candidates are those of
+    one strip holding the whole image, in the same order, to the last bit."""
+    from bokehfit.discs import candidates
+
+    image = strip_scene()
+    monkeypatch.setattr(candidates, "STRIP_PIXELS", 1 << 30)
+    whole = candidates.find_candidates(image, 4.0, 500.0)
+    monkeypatch.setattr(candidates, "STRIP_PIXELS", 1)
+    assert len(candidates._strips(*image.shape, 19)) >= 6  # band 4: a 19-px square, strips of 76 rows
+    strips = candidates.find_candidates(image, 4.0, 500.0)
+    assert len(whole) >= 20 and any(c.cluster for c in whole) and any(c.diameter_px > 100 for c in whole)
+    assert strips == whole
+
+
+def test_fast_median_and_percentile_are_numpys():
+    from bokehfit.discs.measure import _median, _percentile
+
+    rng = np.random.default_rng(11)
+    for trial in range(2000):
+        kind = (np.float32, np.float64)[trial % 2]
+        values = (rng.normal(size=int(rng.integers(1, 40))) * 10.0 ** rng.uniform(-4, 1)).astype(kind)
+        if trial % 3 == 0:
+            values = np.round(values, 1).astype(kind)  # ties
+        expected, got = np.median(values), _median(values)
+        assert got == expected and got.dtype == expected.dtype, (values, got, expected)
+        for q in (10, 50, 90, 37.5):
+            expected, got = np.percentile(values, q), _percentile(values, q)
+            assert got == expected and got.dtype == expected.dtype, (values, q, got, expected)
+
+
+def test_hole_filling_is_scipys():
+    from scipy import ndimage
+
+    from bokehfit.discs.measure import _fill_holes
+
+    rng = np.random.default_rng(12)
+    for _ in range(500):
+        mask = rng.random(tuple(rng.integers(1, 30, 2))) < rng.random()
+        np.testing.assert_array_equal(_fill_holes(mask), ndimage.binary_fill_holes(mask))
+
+
+def test_outline_is_the_largest_contour_around_the_seed():
+    """The outline traces only the regions that may bound the seed; it is the contour that
+    tracing every region of the crop and keeping the largest one around the seed gives."""
+    from skimage import measure
+
+    from bokehfit.discs.measure import _outline
+
+    def every_contour(crop, level, background, seed_rc):
+        padded = np.pad(crop, 1, mode="constant", constant_values=min(background, level - 1e-6))
+        best, best_area = None, 0.0
+        for contour in measure.find_contours(padded, level):
+            if len(contour) < 4:
+                continue
+            xy = contour[:, ::-1] - 1.0
+            area = 0.5 * abs(np.dot(xy[:, 0], np.roll(xy[:, 1], -1)) - np.dot(xy[:, 1], np.roll(xy[:, 0], -1)))
+            inside = cv2.pointPolygonTest(xy.astype(np.float32), (float(seed_rc[1]), float(seed_rc[0])), False) >= 0
+            if area > best_area and inside:
+                best, best_area = xy, area
+        return best
+
+    rng = np.random.default_rng(13)
+    found = 0
+    for trial in range(150):
+        size = int(rng.integers(20, 90))
+        texture = cv2.GaussianBlur(rng.random((size, size)).astype(np.float32), (0, 0), rng.uniform(0.7, 3.0))
+        rows, cols = np.indices(texture.shape)
+        centre = rng.uniform(0.3 * size, 0.7 * size, 2)
+        ring = np.abs(np.hypot(rows - centre[0], cols - centre[1]) - 0.2 * size) < 2.0  # rings leave holes
+        crop = texture + np.float32(0.2) * ring.astype(np.float32)
+        level = float(np.quantile(crop, rng.uniform(0.3, 0.8)))
+        seed = tuple(centre + rng.normal(0, 3, 2))
+        expected, got = every_contour(crop, level, 0.0, seed), _outline(crop, level, 0.0, seed)
+        assert (expected is None) == (got is None)
+        if expected is not None:
+            found += 1  # the same points (traced in a box of the crop: rounding of its offset aside)
+            assert got.shape == expected.shape
+            np.testing.assert_allclose(got, expected, rtol=0, atol=1e-9)
+    assert found >= 50
+
+
+def test_outline_points_near_a_mask_are_those_of_the_whole_crop():
+    """The distance transform is taken over the outline's box and a margin only: every point's
+    verdict is the one the transform of the whole crop gives."""
+    from scipy import ndimage
+
+    from bokehfit.discs.measure import UNSEEN_MARGIN_PX, _near
+
+    rng = np.random.default_rng(14)
+    near_some = 0
+    for _ in range(1500):
+        height, width = rng.integers(10, 80, 2)
+        mask = rng.random((height, width)) < rng.uniform(0.001, 0.05)
+        mask[rng.integers(height), rng.integers(width)] = True  # not empty (that case returns at once)
+        angles = rng.uniform(0, 2 * np.pi, int(rng.integers(4, 40)))
+        centre, radius = rng.uniform(0, (width, height)), rng.uniform(2, 30)
+        outline = centre + radius * np.column_stack([np.cos(angles), np.sin(angles)])
+        coords = [np.clip(outline[:, 1], 0, height - 1), np.clip(outline[:, 0], 0, width - 1)]
+        whole = ndimage.map_coordinates(ndimage.distance_transform_edt(~mask), coords, order=1, mode="nearest")
+        got = _near(mask, outline, UNSEEN_MARGIN_PX)
+        np.testing.assert_array_equal(got, whole <= UNSEEN_MARGIN_PX)
+        near_some += bool(got.any()) and not got.all()
+    assert near_some >= 100

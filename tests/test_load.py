@@ -185,6 +185,34 @@ def test_luminance_weights_on_pure_colours(tmp_path):
     np.testing.assert_allclose(patch_medians(jpeg.luminance, 3), SRGB_WEIGHTS, rtol=0.01)
 
 
+def test_colour_jpeg_display_is_the_decoded_rgb_over_many_blocks(tmp_path):
+    """The display is the decoded image with its channels put in RGB order, block by block:
+    the image is taller than several blocks, and every row is swapped exactly once."""
+    codes = random_codes((4 * photo_module._BLOCK_ROWS + 7, 48, 3), 8, seed=31)
+    path = write_jpeg(tmp_path / "tall.jpg", codes)
+    photo = load_photo(path)
+    decoded = cv2.imread(str(path), cv2.IMREAD_UNCHANGED | cv2.IMREAD_IGNORE_ORIENTATION)
+    np.testing.assert_array_equal(photo.display, decoded[..., ::-1])
+    assert photo.display.flags.c_contiguous and not photo.display.flags.writeable
+    np.testing.assert_allclose(photo.luminance, expected_luminance(decoded[..., ::-1], 8), rtol=0, atol=EXACT)
+    np.testing.assert_array_equal(photo.clipped, (decoded == 255).any(axis=2))
+
+
+def test_jpeg_whose_name_opencv_cannot_take_is_decoded_from_its_bytes(tmp_path):
+    """A name that is not valid text (bytes a file system accepts) makes OpenCV's file read fail:
+    the bytes already read are decoded instead, to the same photo."""
+    import os
+
+    codes = random_codes((30, 40, 3), 8, seed=32)
+    plain = write_jpeg(tmp_path / "plain.jpg", codes)
+    odd = os.path.join(os.fsencode(tmp_path), b"odd-\xff.jpg")
+    with open(odd, "wb") as file:
+        file.write(plain.read_bytes())
+    photo, reference = load_photo(os.fsdecode(odd)), load_photo(plain)
+    np.testing.assert_array_equal(photo.luminance, reference.luminance)
+    np.testing.assert_array_equal(photo.display, reference.display)
+
+
 def test_all_black_and_all_white_are_not_errors(tmp_path):
     black = load_photo(write_png(tmp_path / "black.png", np.zeros((20, 20, 3), np.uint8)))
     white = load_photo(write_png(tmp_path / "white.png", np.full((20, 20, 3), 255, np.uint8)))

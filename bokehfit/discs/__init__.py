@@ -220,9 +220,11 @@ def _check_image(luminance) -> np.ndarray:
     if array.dtype != np.float32:
         with np.errstate(over="ignore"):  # float64 beyond float32's range becomes inf: refused below
             array = array.astype(np.float32)
-    if not np.isfinite(array).all():
+    # Reductions, not element-wise tests: no temporary the size of the image. NaN makes both NaN.
+    low, high = float(array.min()), float(array.max())
+    if not (math.isfinite(low) and math.isfinite(high)):
         raise InputError("luminance contains NaN or Inf values")
-    peak = float(np.abs(array).max())
+    peak = max(abs(low), abs(high))
     if peak > MAX_LUMINANCE:
         raise InputError(
             f"luminance reaches {peak:.3g}; find_discs expects linear light with 1.0 = white and values up to"

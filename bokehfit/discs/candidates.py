@@ -26,6 +26,17 @@ and every band costs about the same. On that copy:
 
 Each candidate is measured at full resolution by :mod:`bokehfit.discs.measure`;
 one disc seen in two bands is kept once.
+
+Work and memory: a band's copy is searched in strips of about ``STRIP_PIXELS``
+pixels, so that no temporary the size of the photo is made. Each strip's opening
+is computed with a margin of the element's reach (twice its half-side), which
+makes its rows exactly those of the whole copy's opening; σ is gathered strip by
+strip first, and the blobs are labelled per strip and joined where they run
+across a border (8-connected, as in one piece). Only the blobs with a pixel at
+the least peak a candidate needs are kept, as lists of their pixels; their
+figures (centroids as sums of whole numbers over the area) are those of labelling
+the copy in one piece. Candidates come out in raster order of their first pixel.
+Bands searched on a reduced copy go first, the largest copy first.
 """
 
 from __future__ import annotations
@@ -80,6 +91,9 @@ BAND_OVERLAP_LOW = 0.8
 BAND_OVERLAP_HIGH = 1.25
 #: Noise floor (linear units).
 MIN_NOISE = 1e-4
+#: Pixels of a band's image searched at a time (whole rows, and the margins the opening and
+#: the blobs need): the search's temporaries stay a small share of the photo's own arrays.
+STRIP_PIXELS = 1 << 20
 
 
 @dataclass(frozen=True)
@@ -98,12 +112,178 @@ def contrast_floor_rel(diameter_px):
     return np.where(np.asarray(diameter_px) >= LARGE_DISC_PX, MIN_CONTRAST_REL_LARGE, MIN_CONTRAST_REL)
 
 
-def _label_maxima(values: np.ndarray, labels: np.ndarray, count: int) -> np.ndarray:
-    """Largest value under each label 1 … count − 1 (label 0, the background, gets −∞)."""
-    maxima = np.full(count, -np.inf, dtype=np.float32)
-    inside = labels > 0  # blobs cover a small part of the image: visit only their pixels
-    np.maximum.at(maxima, labels[inside], values[inside])
-    return maxima
+def _opening(image: np.ndarray, element: np.ndarray, r0: int, r1: int) -> np.ndarray:
+    """Rows ``r0:r1`` of the grey-scale opening of ``image``, computed on those rows and the
+    element's reach around them (an erosion and a dilation: twice its half-side): exactly the
+    rows of the whole image's opening, with its reflected border at the frame's edges."""
+    reach = element.shape[0] - 1
+    s0, s1 = max(0, r0 - reach), min(image.shape[0], r1 + reach)
+    opened = cv2.morphologyEx(image[s0:s1], cv2.MORPH_OPEN, element, borderType=cv2.BORDER_REFLECT)
+    return opened[r0 - s0 : r1 - s0]
+
+
+def _strips(height: int, width: int, side: int) -> list[tuple[int, int]]:
+    """Row ranges of about STRIP_PIXELS pixels each, at least four sides of the element tall
+    (the opening's margins are then at most half the rows computed)."""
+    rows = max(4 * side, STRIP_PIXELS // max(width, 1))
+    return [(r0, min(r0 + rows, height)) for r0 in range(0, height, rows)]
+
+
+def _noise(image: np.ndarray, element: np.ndarray) -> tuple[float, np.ndarray | None]:
+    """The band's noise level σ (module notes), and the whole opening where it is one strip.
+
+    σ is taken on every ``step``-th row and column of the residual (about 250 000 pixels),
+    gathered strip by strip."""
+    height, width = image.shape
+    step = max(1, round(math.sqrt(image.size / 250_000)))
+    strips = _strips(height, width, element.shape[0])
+    samples = []
+    for r0, r1 in strips:
+        background = _opening(image, element, r0, r1)
+        first = -r0 % step
+        samples.append(image[r0 + first : r1 : step, ::step] - background[first::step, ::step])
+    sample = np.concatenate(samples)
+    median = float(np.median(sample))
+    sigma = max(MIN_NOISE, 1.4826 * float(np.median(np.abs(sample - median))))
+    return sigma, background if len(strips) == 1 else None
+
+
+@dataclass(frozen=True)
+class _Blobs:
+    """8-connected pixel regions of a band's image, one entry per region: what candidates need."""
+
+    first: np.ndarray  #: raster index (row · width + column) of the first pixel, for a stable order
+    area: np.ndarray
+    centroid: np.ndarray  #: (n, 2): (column, row)
+    extent: np.ndarray  #: half the longer side of the bounding box
+    peak: np.ndarray  #: largest residual (float32)
+    background: np.ndarray  #: largest background (float32)
+
+
+def _describe(region: np.ndarray, count: int, flat: np.ndarray, residual, background, width: int) -> _Blobs:
+    """The :class:`_Blobs` of ``count`` regions, from their pixels: ``region`` (0 … count − 1)
+    and ``flat`` (raster index) per pixel, with its residual and background.
+
+    The centroids are sums of whole numbers over the area, as OpenCV's connected components give them."""
+    # ufunc.at is fast only where the values have the type of the array they go into.
+    kind = flat.dtype
+    rows, cols = np.divmod(flat, kind.type(width))
+    area = np.bincount(region, minlength=count)
+    first = np.full(count, np.iinfo(kind).max, dtype=kind)
+    np.minimum.at(first, region, flat)
+    sides = []
+    for values in (cols, rows):
+        low, high = np.full(count, np.iinfo(kind).max, dtype=kind), np.full(count, -1, dtype=kind)
+        np.minimum.at(low, region, values)
+        np.maximum.at(high, region, values)
+        sides.append(high - low + 1)
+    sums = [np.bincount(region, weights=values, minlength=count) for values in (cols, rows)]
+    peak = np.full(count, -np.inf, dtype=np.float32)
+    np.maximum.at(peak, region, residual)
+    lifted = np.full(count, -np.inf, dtype=np.float32)
+    np.maximum.at(lifted, region, background)
+    centroid = np.column_stack([sums[0] / area, sums[1] / area])
+    return _Blobs(first, area, centroid, 0.5 * np.maximum(*sides), peak, lifted)
+
+
+def _join(edges: list[tuple[np.ndarray, np.ndarray]], total: int, width: int) -> tuple[int, np.ndarray]:
+    """Number of regions, and the region of each of ``total`` strip-wise labels: labels that are
+    8-connected across a border between strips are one region. ``edges`` holds per strip the
+    labels along its first and last rows (−1: no pixel)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    sources, targets = [], []
+    for (_, above), (below, _) in zip(edges, edges[1:]):
+        for shift in (-1, 0, 1):  # pixel (r − 1, c) touches (r, c + shift)
+            a = above[max(0, -shift) : width - max(0, shift)]
+            b = below[max(0, shift) : width - max(0, -shift)]
+            both = (a >= 0) & (b >= 0)
+            sources.append(a[both])
+            targets.append(b[both])
+    sources = np.concatenate(sources) if sources else np.zeros(0, dtype=np.int32)
+    targets = np.concatenate(targets) if targets else np.zeros(0, dtype=np.int32)
+    graph = coo_matrix((np.ones(len(sources), dtype=np.int8), (sources, targets)), shape=(total, total))
+    return connected_components(graph, directed=False)
+
+
+def _strip_labels(mask: np.ndarray, offset: int) -> tuple[int, np.ndarray, tuple[np.ndarray, np.ndarray]]:
+    """8-connected labels of a strip's mask, numbered from ``offset`` (−1: not in the mask), as
+    (count, labels, (first row, last row))."""
+    count, labels = cv2.connectedComponents(mask.view(np.uint8), connectivity=8, ltype=cv2.CV_32S)
+    labels += offset - 1
+    labels[~mask] = -1
+    return count - 1, labels, (labels[0].copy(), labels[-1].copy())
+
+
+def _band_blobs(image, element, whole, sigma) -> tuple[_Blobs, _Blobs, np.ndarray]:
+    """The low-threshold blobs of a band's image that may give candidates, their half-peak
+    regions, and per half-peak region the index of its blob.
+
+    The image is searched in strips of rows (the opening with a margin of its reach, so
+    that every row is exact), and regions that run across the borders of strips are joined.
+    Only blobs with a pixel at the least peak a candidate needs (``PEAK_SIGMA`` σ and
+    ``MIN_CONTRAST_ABS``) are kept: a half-peak region's peak is at most its blob's, so the
+    others give none. Their pixels are kept as lists (index, residual, background): the
+    candidates' blobs cover a small part of the image.
+    """
+    height, width = image.shape
+    least = max(PEAK_SIGMA * sigma, MIN_CONTRAST_ABS)
+    strips = _strips(height, width, element.shape[0])
+    index = np.int32 if image.size < 2**31 else np.int64
+    kept: dict[str, list[np.ndarray]] = {"flat": [], "residual": [], "background": [], "label": []}
+    edges, seeds, total = [], [], 0
+    for r0, r1 in strips:
+        background = whole[r0:r1] if whole is not None else _opening(image, element, r0, r1)
+        residual = image[r0:r1] - background
+        low = residual > SIGMA_THRESHOLD * sigma
+        count, labels, edge = _strip_labels(low, total)
+        wanted = np.zeros(total + count + 1, dtype=np.bool_)
+        wanted[labels[low & (residual >= least)] + 1] = True
+        seeds.append(np.flatnonzero(wanted) - 1)
+        # A blob without a seed here may still be joined to one in another strip through a border row.
+        wanted[np.concatenate(edge) + 1] = True
+        wanted[0] = False  # no pixel
+        at = np.flatnonzero(wanted[labels + 1])
+        kept["flat"].append((at + r0 * width).astype(index))
+        kept["residual"].append(residual.ravel()[at])
+        kept["background"].append(background.ravel()[at])
+        kept["label"].append(labels.ravel()[at])
+        edges.append(edge)
+        total += count
+    del background, residual, low, labels, wanted, at  # the last strip's
+    _, region = _join(edges, total, width)
+    seeded = np.zeros(total, dtype=np.bool_)
+    seeded[region[np.concatenate(seeds)]] = True
+    numbers = np.cumsum(seeded) - 1  # the seeded regions, numbered 0 … n − 1
+    inside = [seeded[region[label]] for label in kept["label"]]
+    # One list at a time, each dropped as it is joined: the unseeded pixels are not copied.
+    flat, residual, background, label = (
+        np.concatenate([part[keep] for part, keep in zip(kept.pop(name), inside)])
+        for name in ("flat", "residual", "background", "label")
+    )
+    blob_of = numbers[region[label]]
+    count = int(numbers[-1]) + 1 if total else 0
+    del label, inside, numbers, seeded
+    blobs = _describe(blob_of, count, flat, residual, background, width)
+    # Each blob cut at half its peak (as float32, as the comparison was made per pixel).
+    half = residual >= 0.5 * blobs.peak[blob_of]
+    flat, residual, background, blob_of = flat[half], residual[half], background[half], blob_of[half]
+    bounds = np.searchsorted(flat, [r0 * width for r0, _ in strips] + [height * width])
+    parts, edges, total = [], [], 0
+    for (r0, r1), i0, i1 in zip(strips, bounds, bounds[1:]):
+        mask = np.zeros((r1 - r0, width), dtype=np.bool_)
+        mask.ravel()[flat[i0:i1] - r0 * width] = True
+        count, labels, edge = _strip_labels(mask, total)
+        parts.append(labels.ravel()[flat[i0:i1] - r0 * width])
+        edges.append(edge)
+        total += count
+    del mask, labels
+    count, region = _join(edges, total, width)
+    region = region[np.concatenate(parts)]
+    owner = np.zeros(count, dtype=np.int64)
+    owner[region] = blob_of
+    return blobs, _describe(region, count, flat, residual, background, width), owner
 
 
 def _band_candidates(luminance: np.ndarray, band: float, min_diameter: float) -> list[Candidate]:
@@ -117,73 +297,55 @@ def _band_candidates(luminance: np.ndarray, band: float, min_diameter: float) ->
     reach = BACKGROUND_REACH_LARGE if 2.0 * band >= LARGE_DISC_PX else BACKGROUND_REACH
     side = 2 * math.ceil(reach * band / factor) + 3
     element = cv2.getStructuringElement(cv2.MORPH_RECT, (side, side))
-    background = cv2.morphologyEx(image, cv2.MORPH_OPEN, element, borderType=cv2.BORDER_REFLECT)
-    residual = image - background
-    step = max(1, round(math.sqrt(residual.size / 250_000)))
-    sample = residual[::step, ::step]
-    median = float(np.median(sample))
-    sigma = max(MIN_NOISE, 1.4826 * float(np.median(np.abs(sample - median))))
-    low_count, low_labels, low_stats, low_centroids = cv2.connectedComponentsWithStats(
-        (residual > SIGMA_THRESHOLD * sigma).view(np.uint8), connectivity=8, ltype=cv2.CV_32S
-    )
-    if low_count <= 1:
-        return []
-    low_peaks = _label_maxima(residual, low_labels, low_count)
-    low_peaks[0] = np.inf  # background pixels never pass
-    count, labels, stats, centroids = cv2.connectedComponentsWithStats(
-        (residual >= 0.5 * low_peaks[low_labels]).view(np.uint8), connectivity=8, ltype=cv2.CV_32S
-    )
-    clusters = _cluster_candidates(
-        residual, background, sigma, factor, band, (low_count, low_labels, low_stats, low_centroids, low_peaks), labels, stats
-    )
-    diameters = 2.0 * np.sqrt(stats[:, cv2.CC_STAT_AREA] / math.pi) * factor
+    sigma, whole = _noise(image, element)
     low = min_diameter if band <= min_diameter * 1.01 else BAND_OVERLAP_LOW * band
-    peaks = _label_maxima(residual, labels, count)
-    floor = np.maximum(MIN_CONTRAST_ABS, contrast_floor_rel(diameters) * _label_maxima(background, labels, count))
+    blobs, regions, owner = _band_blobs(image, element, whole, sigma)
+    diameters = 2.0 * np.sqrt(regions.area / math.pi) * factor
+    floor = np.maximum(MIN_CONTRAST_ABS, contrast_floor_rel(diameters) * regions.background)
     keep = (diameters >= low) & (diameters < BAND_OVERLAP_HIGH * 2.0 * band)
-    keep &= (peaks >= PEAK_SIGMA * sigma) & (peaks >= floor)
-    keep[0] = False
+    keep &= (regions.peak >= PEAK_SIGMA * sigma) & (regions.peak >= floor)
+    found = [(False, regions, k, float(diameters[k])) for k in np.nonzero(keep)[0]]
+    found += [(True, blobs, k, d) for k, d in _cluster_blobs(blobs, regions, owner, sigma, factor, band)]
+    found.sort(key=lambda item: (item[0], item[1].first[item[2]]))  # regions, then clusters, each in raster order
     return [
         Candidate(
-            ((centroids[k, 0] + 0.5) * factor - 0.5, (centroids[k, 1] + 0.5) * factor - 0.5),
-            float(diameters[k]),
-            0.5 * max(stats[k, cv2.CC_STAT_WIDTH], stats[k, cv2.CC_STAT_HEIGHT]) * factor,
-            float(peaks[k] / sigma),
+            ((blobs.centroid[k, 0] + 0.5) * factor - 0.5, (blobs.centroid[k, 1] + 0.5) * factor - 0.5),
+            diameter,
+            float(blobs.extent[k] * factor),
+            float(blobs.peak[k] / sigma),
+            cluster=cluster,
         )
-        for k in np.nonzero(keep)[0]
-    ] + clusters
-
-
-def _cluster_candidates(residual, background, sigma, factor, band, low, labels, stats) -> list[Candidate]:
-    """Candidates for low-threshold blobs much larger than their largest half-peak region."""
-    low_count, low_labels, low_stats, low_centroids, low_peaks = low
-    inside = labels > 0
-    largest = np.zeros(low_count, dtype=np.int64)
-    np.maximum.at(largest, low_labels[inside], stats[labels[inside], cv2.CC_STAT_AREA])
-    areas = low_stats[:, cv2.CC_STAT_AREA]
-    diameters = 2.0 * np.sqrt(areas / math.pi) * factor
-    floor = np.maximum(MIN_CONTRAST_ABS, contrast_floor_rel(diameters) * _label_maxima(background, low_labels, low_count))
-    keep = (areas > CLUSTER_AREA_RATIO * np.maximum(largest, 1)) & (largest > 0)
-    keep &= (diameters >= BAND_OVERLAP_LOW * band) & (diameters < BAND_OVERLAP_HIGH * 2.0 * band)
-    keep &= (low_peaks >= PEAK_SIGMA * sigma) & (low_peaks >= floor)
-    keep[0] = False
-    return [
-        Candidate(
-            ((low_centroids[k, 0] + 0.5) * factor - 0.5, (low_centroids[k, 1] + 0.5) * factor - 0.5),
-            float(diameters[k]),
-            0.5 * max(low_stats[k, cv2.CC_STAT_WIDTH], low_stats[k, cv2.CC_STAT_HEIGHT]) * factor,
-            float(low_peaks[k] / sigma),
-            cluster=True,
-        )
-        for k in np.nonzero(keep)[0]
+        for cluster, blobs, k, diameter in found
     ]
 
 
+def _cluster_blobs(blobs: _Blobs, regions: _Blobs, owner: np.ndarray, sigma, factor, band) -> list[tuple[int, float]]:
+    """(index, diameter) of the low-threshold blobs much larger than their largest half-peak region."""
+    largest = np.zeros(len(blobs.area), dtype=np.int64)
+    np.maximum.at(largest, owner, regions.area)
+    diameters = 2.0 * np.sqrt(blobs.area / math.pi) * factor
+    floor = np.maximum(MIN_CONTRAST_ABS, contrast_floor_rel(diameters) * blobs.background)
+    keep = (blobs.area > CLUSTER_AREA_RATIO * np.maximum(largest, 1)) & (largest > 0)
+    keep &= (diameters >= BAND_OVERLAP_LOW * band) & (diameters < BAND_OVERLAP_HIGH * 2.0 * band)
+    keep &= (blobs.peak >= PEAK_SIGMA * sigma) & (blobs.peak >= floor)
+    return [(k, float(diameters[k])) for k in np.nonzero(keep)[0]]
+
+
 def find_candidates(luminance: np.ndarray, min_diameter_px: float, max_diameter_px: float) -> list[Candidate]:
-    """Candidates of every octave band from ``min_diameter_px`` to ``max_diameter_px``."""
-    candidates: list[Candidate] = []
+    """Candidates of every octave band from ``min_diameter_px`` to ``max_diameter_px``, band by band.
+
+    The bands searched on a reduced copy go first, the largest copy first, and the bands
+    searched on the image itself last: the largest copy then does not come on top of the
+    memory that searching the whole image leaves with the allocator.
+    """
+    bands = []
     band = min_diameter_px
     while band < max_diameter_px:
-        candidates.extend(_band_candidates(luminance, band, min_diameter_px))
+        bands.append(band)
         band *= 2.0
-    return candidates
+    found = {band: _band_candidates(luminance, band, min_diameter_px) for band in sorted(bands, key=_search_order)}
+    return [candidate for band in bands for candidate in found[band]]
+
+
+def _search_order(band: float) -> tuple[bool, float]:
+    return band <= BAND_SIDE_PX, band

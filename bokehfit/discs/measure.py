@@ -228,11 +228,52 @@ class Measurement:
 
 
 
-def _background_plane(crop: np.ndarray, where: np.ndarray) -> np.ndarray:
-    """A plane fitted to ``crop[where]``, robustly (least squares on the pixels within
-    PLANE_INLIER_MAD scaled deviations of a first fit, so that a neighbouring disc in the
-    surround does not tilt it), evaluated over the whole crop, minus its median over ``where``."""
-    rows, cols = np.nonzero(where)
+def _median(values: np.ndarray):
+    """``np.median`` of a 1-D array without NaN, the same number in the array's type, without
+    its general machinery (a candidate's levels take a dozen medians and percentiles)."""
+    half = values.size // 2
+    if values.size % 2:
+        return np.partition(values, half)[half]
+    part = np.partition(values, (half - 1, half))
+    return (part[half - 1] + part[half]) / 2
+
+
+def _percentile(values: np.ndarray, q: float):
+    """``np.percentile(values, q)`` (its default, linear method) of a 1-D array without NaN,
+    the same number in the array's type."""
+    virtual = (values.size - 1) * (q / 100)
+    lower = math.floor(virtual)
+    if virtual >= values.size - 1:
+        return np.partition(values, -1)[-1]
+    part = np.partition(values, (lower, lower + 1))
+    below, above = part[lower], part[lower + 1]
+    gamma = virtual - lower
+    step = above - below
+    return above - step * (1 - gamma) if gamma >= 0.5 else below + step * gamma
+
+
+@dataclass(frozen=True)
+class _Plane:
+    """A background plane over a crop, ``slope_row · row + slope_col · col − offset`` (float32)."""
+
+    slope_row: float
+    slope_col: float
+    offset: float
+
+    def at(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """Its values at the pixels (rows, cols)."""
+        return (self.slope_row * rows + self.slope_col * cols - self.offset).astype(np.float32)
+
+    def over(self, shape: tuple[int, int]) -> np.ndarray:
+        """Its values over a crop of ``shape``."""
+        rows, cols = np.ogrid[: shape[0], : shape[1]]
+        return (self.slope_row * rows + self.slope_col * cols - self.offset).astype(np.float32)
+
+
+def _background_plane(crop: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> _Plane | None:
+    """A plane fitted to the crop's pixels (rows, cols), robustly (least squares on the pixels
+    within PLANE_INLIER_MAD scaled deviations of a first fit, so that a neighbouring disc in
+    the surround does not tilt it), less its median over them; None where too few pixels fit."""
     step = max(1, len(rows) // PLANE_MAX_PIXELS)  # a plane needs a few hundred pixels, not all of them
     rows, cols = rows[::step], cols[::step]
     values = crop[rows, cols].astype(np.float64)
@@ -241,36 +282,45 @@ def _background_plane(crop: np.ndarray, where: np.ndarray) -> np.ndarray:
     for _ in range(2):
         coefficients, *_ = np.linalg.lstsq(design[inliers], values[inliers], rcond=None)
         residual = values - design @ coefficients
-        spread = 1.4826 * float(np.median(np.abs(residual - np.median(residual))))
-        inliers = np.abs(residual - np.median(residual)) <= PLANE_INLIER_MAD * max(spread, 1e-12)
+        deviation = np.abs(residual - _median(residual))
+        spread = 1.4826 * float(_median(deviation))
+        inliers = deviation <= PLANE_INLIER_MAD * max(spread, 1e-12)
         if inliers.sum() < 8:
-            return np.zeros(crop.shape, dtype=np.float32)
-    r, c = np.ogrid[: crop.shape[0], : crop.shape[1]]
-    plane = coefficients[1] * r + coefficients[2] * c
-    return (plane - np.median(design[:, 1:] @ coefficients[1:])).astype(np.float32)
+            return None
+    return _Plane(float(coefficients[1]), float(coefficients[2]), float(_median(design[:, 1:] @ coefficients[1:])))
 
 
 def _annulus_levels(crop: np.ndarray, distance: np.ndarray, radius: float):
-    """The crop with the surround's gradient taken out, and the median, robust spread and
-    lift (median − 10th percentile) of its annulus 1.3 r … 1.7 r (+ 2 px).
+    """The plane of the surround's gradient (or None), and the median, robust spread and
+    lift (median − 10th percentile) of the annulus 1.3 r … 1.7 r (+ 2 px) less that plane.
 
     The background model at the disc's scale is a plane fitted to the annulus: a
     smooth gradient across a large disc's surround (haze, vignetting) can exceed
     the contrast of a faint disc, and no one level would then outline it. Texture
-    and grain stay in the spread.
+    and grain stay in the spread. The plane is taken out of the pixels used here only:
+    most candidates are found faint on these levels, and need no more of the crop.
     """
     where = (distance >= 1.3 * radius + 1.0) & (distance <= 1.7 * radius + 3.0)
-    if where.sum() < 8:
+    inside = int(where.sum())
+    if inside < 8:
         where = distance >= 1.3 * radius + 1.0
-    if where.sum() < 8:
+        inside = int(where.sum())
+    if inside < 8:
         return None  # the window holds no surround: the disc fills or overflows the frame
     annulus_px = math.pi * ((1.7 * radius + 3.0) ** 2 - (1.3 * radius + 1.0) ** 2)
-    if where.sum() >= max(PLANE_MIN_PIXELS, PLANE_MIN_ANNULUS_SHARE * annulus_px):
-        crop = crop - _background_plane(crop, where)
-    ring = crop[where]
-    median = float(np.median(ring))
-    low = float(np.percentile(ring, 10))
-    return crop, (median, 1.4826 * float(np.median(np.abs(ring - median))), median - low)
+    rows, cols = np.nonzero(where)
+    plane = None
+    if inside >= max(PLANE_MIN_PIXELS, PLANE_MIN_ANNULUS_SHARE * annulus_px):
+        plane = _background_plane(crop, rows, cols)
+    ring = crop[rows, cols] if plane is None else crop[rows, cols] - plane.at(rows, cols)
+    median = float(_median(ring))
+    low = float(_percentile(ring, 10))
+    return plane, (median, 1.4826 * float(_median(np.abs(ring - median))), median - low)
+
+
+def _levelled(crop: np.ndarray, where: np.ndarray, plane: _Plane | None) -> np.ndarray:
+    """``crop[where]`` less the background plane."""
+    return crop[where] if plane is None else crop[where] - plane.at(*np.nonzero(where))
 
 
 def _edge_gradient(crop: np.ndarray, outline: np.ndarray) -> float:
@@ -279,7 +329,7 @@ def _edge_gradient(crop: np.ndarray, outline: np.ndarray) -> float:
     coords = [outline[:, 1], outline[:, 0]]  # (row, col)
     gx_at = ndimage.map_coordinates(gx, coords, order=1, mode="nearest")
     gy_at = ndimage.map_coordinates(gy, coords, order=1, mode="nearest")
-    return float(np.median(np.hypot(gx_at, gy_at)))
+    return float(_median(np.hypot(gx_at, gy_at)))
 
 
 def _outline(crop: np.ndarray, level: float, background: float, seed_rc: tuple[float, float]) -> np.ndarray | None:
@@ -288,7 +338,7 @@ def _outline(crop: np.ndarray, level: float, background: float, seed_rc: tuple[f
     padded = np.pad(crop, 1, mode="constant", constant_values=min(background, level - 1e-6))
     # Trace only the regions above the level whose boxes hold the seed (the contour around the
     # seed bounds one of them): a large window over texture holds many others.
-    count, _, stats, _ = cv2.connectedComponentsWithStats((padded > level).view(np.uint8), connectivity=8)
+    count, labels, stats, _ = cv2.connectedComponentsWithStats((padded > level).view(np.uint8), connectivity=8)
     x0, y0 = stats[:, cv2.CC_STAT_LEFT], stats[:, cv2.CC_STAT_TOP]
     x1, y1 = x0 + stats[:, cv2.CC_STAT_WIDTH], y0 + stats[:, cv2.CC_STAT_HEIGHT]
     row, col = seed_rc[0] + 1.0, seed_rc[1] + 1.0
@@ -298,7 +348,30 @@ def _outline(crop: np.ndarray, level: float, background: float, seed_rc: tuple[f
         return None
     r0, c0 = max(0, int(y0[hit].min()) - 1), max(0, int(x0[hit].min()) - 1)
     r1, c1 = int(y1[hit].max()) + 1, int(x1[hit].max()) + 1
-    contours = measure.find_contours(padded[r0:r1, c0:c1], level)
+    # The contour sought is the outer contour of a hit region (a hole's contour lies inside its
+    # region's outer one), and one whose region, holes filled, comes within a pixel of the seed
+    # (a contour runs between a pixel of its region and one outside). The box is traced with
+    # the other regions (texture, specks) lowered below the level and the holes of those kept
+    # raised above it: no pixel of either is 8-connected to the pixels on a kept outer contour,
+    # so no marching-squares cell of that contour holds one (skimage joins pixels below the
+    # level diagonally, as the holes are found here), and those contours stay exactly as they
+    # were, without thousands of others.
+    box, labels = padded[r0:r1, c0:c1], labels[r0:r1, c0:c1]
+    high = hit[labels]
+    _, outside = cv2.connectedComponents((~high).view(np.uint8), connectivity=8)
+    filled = outside != outside[0, 0]  # the box's border lies outside every hit region
+    count, regions = cv2.connectedComponents(filled.view(np.uint8), connectivity=8)
+    row, col = row - r0, col - c0
+    near = np.zeros(count, dtype=np.bool_)
+    near[regions[max(0, math.floor(row - 1.5)) : max(0, math.floor(row + 1.5) + 1),
+                 max(0, math.floor(col - 1.5)) : max(0, math.floor(col + 1.5) + 1)]] = True
+    near[0] = False
+    if not near.any():
+        return None
+    filled &= near[regions]
+    below = np.float32(min(background, level - 1e-6))
+    box = np.where(filled & ~high, padded.max(), np.where((labels > 0) & ~filled, below, box))
+    contours = measure.find_contours(box, level)
     best, best_area = None, 0.0
     for contour in contours:
         if len(contour) < 4:
@@ -369,6 +442,18 @@ def _bridge_occluders(crop, distance, level, plateau, radius):
     return crop, mask
 
 
+def _fill_holes(mask: np.ndarray) -> np.ndarray:
+    """``mask`` with its holes filled: the pixels outside it that no 4-connected path outside it
+    joins to the border (``scipy.ndimage.binary_fill_holes`` with its default cross)."""
+    if mask.size == 0:
+        return mask.copy()
+    count, labels = cv2.connectedComponents((~mask).view(np.uint8), connectivity=4)
+    open_ = np.zeros(count, dtype=np.bool_)
+    for border in (labels[0], labels[-1], labels[:, 0], labels[:, -1]):
+        open_[border] = True
+    return mask | ~open_[labels]
+
+
 def _box(distance: np.ndarray, reach: float) -> tuple[slice, slice]:
     """The bounding box of the pixels within ``reach`` of the centre."""
     rows = np.nonzero((distance <= reach).any(axis=1))[0]
@@ -382,7 +467,7 @@ def _bridge_in_box(crop, distance, level, plateau, radius, side):
     """:func:`_bridge_occluders` within the disc's box."""
     if crop.size == 0:
         return crop, None
-    above = ndimage.binary_fill_holes(crop > level)
+    above = _fill_holes(crop > level)
     # Only the disc's pieces are joined, not the noise specks around a faint one.
     count, labels, stats, _ = cv2.connectedComponentsWithStats(above.view(np.uint8), connectivity=8)
     pieces = np.nonzero(stats[:, cv2.CC_STAT_AREA] >= OCCLUSION_PIECE_SHARE * math.pi * radius * radius)[0]
@@ -454,8 +539,8 @@ def _close_ring(crop, distance, level, plateau, radius):
     element = cv2.getStructuringElement(cv2.MORPH_RECT, (side, side))
     closed = cv2.morphologyEx(above.view(np.uint8), cv2.MORPH_CLOSE, element).astype(bool)
     near = distance[box] <= 1.05 * radius + 1.0
-    filled = ndimage.binary_fill_holes(closed & near)
-    gaps = closed & near & ~ndimage.binary_fill_holes(above & near)
+    filled = _fill_holes(closed & near)
+    gaps = closed & near & ~_fill_holes(above & near)
     raised = crop.copy()
     raised[box] = np.where(filled & ~above, np.float32(max(plateau, level)), crop[box])
     if not gaps.any():
@@ -465,29 +550,35 @@ def _close_ring(crop, distance, level, plateau, radius):
     return raised, mask
 
 
-def _closed_outline(luminance, center_xy, radius, reach, core_rel=0.8, percentile=90):
+def _closed_outline(luminance, center_xy, radius, reach, core_rel=0.8, percentile=90, levelled=None):
     """Levels and the closed 50 % outline around ``center_xy``, growing the window
     while the outline runs into it; the last window masks beyond ``reach`` instead
     (the disc then touches a neighbour). The plateau is the ``percentile`` within
     ``core_rel`` · r. Returns (window, crop, levels, outline, merged, unseen_pixels,
     on_cut): the pixels whose outline is not the disc's own (bridged occluders) or
-    None, and per outline point whether it lies on the cutting circle."""
+    None, and per outline point whether it lies on the cutting circle. ``levelled`` keeps the
+    levels of each window (a dict kept by the caller for one candidate)."""
     height, width = luminance.shape
+    levelled = {} if levelled is None else levelled
     large = max(1.7 * radius + 4.0, reach) >= LARGE_DISC_PX
     for grow in WINDOW_GROWTH[:2] if large else WINDOW_GROWTH:
         half = int(math.ceil(grow * max(1.7 * radius + 4.0, reach)))
         window, distance = _window(luminance, center_xy, half)
         r0, c0, r1, c1 = window
         crop = luminance[r0:r1, c0:c1]
-        levels = _annulus_levels(luminance[r0:r1, c0:c1], distance, radius)
-        if levels is None:
+        key = (center_xy, radius, half)
+        if key not in levelled:  # the ring mode's second plateau percentile has the same window
+            levelled[key] = _annulus_levels(crop, distance, radius)
+        if levelled[key] is None:
             return "no surround"
-        crop, (background, noise, ring_lift) = levels
-        core = crop[distance <= max(core_rel * radius, 0.75)]
-        plateau = float(np.percentile(core, percentile)) if core.size else background
+        plane, (background, noise, ring_lift) = levelled[key]
+        core = _levelled(crop, distance <= max(core_rel * radius, 0.75), plane)
+        plateau = float(_percentile(core, percentile)) if core.size else background
         level = background + 0.5 * (plateau - background)
         if not _contrast_ok(plateau - background, noise, background, 2.0 * radius):
             return "faint"
+        if plane is not None:
+            crop = crop - plane.over(crop.shape)
         seed_rc = (center_xy[1] - r0, center_xy[0] - c0)
         if core_rel == RING_CORE_REL:
             bridged_crop, bridged = _close_ring(crop, distance, level, plateau, radius)
@@ -521,12 +612,24 @@ def _contrast_ok(contrast: float, noise: float, background: float, diameter_px: 
 
 
 def _near(mask: np.ndarray | None, outline: np.ndarray, margin_px: float) -> np.ndarray:
-    """Per outline point (crop coordinates): True within ``margin_px`` of a pixel of ``mask``."""
+    """Per outline point (crop coordinates): True within ``margin_px`` of a pixel of ``mask``.
+
+    The distances are interpolated between the four pixels around each point, which lie within
+    √2 of one another: only distances up to ``margin_px`` + 2√2 decide it, and those of pixels
+    ``pad`` or more inside a box are the same as over the whole crop. So the distance
+    transform is taken over the outline's box and that margin, not the crop."""
     if mask is None or not mask.any():
         return np.zeros(len(outline), dtype=bool)
-    distance = ndimage.distance_transform_edt(~mask)
-    coords = [np.clip(outline[:, 1], 0, mask.shape[0] - 1), np.clip(outline[:, 0], 0, mask.shape[1] - 1)]
-    return ndimage.map_coordinates(distance, coords, order=1, mode="nearest") <= margin_px
+    height, width = mask.shape
+    rows, cols = np.clip(outline[:, 1], 0, height - 1), np.clip(outline[:, 0], 0, width - 1)
+    pad = math.ceil(margin_px + 2.0 * math.sqrt(2.0)) + 2
+    r0, c0 = max(0, int(rows.min()) - pad), max(0, int(cols.min()) - pad)
+    r1, c1 = min(height, int(rows.max()) + pad + 1), min(width, int(cols.max()) + pad + 1)
+    box = mask[r0:r1, c0:c1]
+    if not box.any():  # none within pad of the outline
+        return np.zeros(len(outline), dtype=bool)
+    distance = ndimage.distance_transform_edt(~box)
+    return ndimage.map_coordinates(distance, [rows - r0, cols - c0], order=1, mode="nearest") <= margin_px
 
 
 def _thickness(blob: np.ndarray, radius: float) -> float:
@@ -561,12 +664,13 @@ def measure_candidate(
     if cluster:
         found = _closed_outline(luminance, center_xy, radius, 1.3 * max(radius, extent_px) + 2.0, 0.8, CLUSTER_PLATEAU_PERCENTILE)
         return found if isinstance(found, str) else _describe(luminance, clipped_mask, found, min_noise, min_diameter_px)
-    found = _two_passes(luminance, center_xy, radius, max(radius, extent_px), 0.8)
+    levelled: dict = {}
+    found = _two_passes(luminance, center_xy, radius, max(radius, extent_px), 0.8, levelled=levelled)
     hollow = extent_px > RING_REACH * radius and extent_px >= RESOLVABLE_PX  # a ring shows as one from 16 px
     if isinstance(found, str) and found in ("faint", "no outline") and hollow:
         # A ring's half-peak region is its rim: take its reach as the radius, the rim as the plateau.
         for percentile in RING_PLATEAU_PERCENTILES:
-            ring = _two_passes(luminance, center_xy, extent_px, extent_px, RING_CORE_REL, percentile)
+            ring = _two_passes(luminance, center_xy, extent_px, extent_px, RING_CORE_REL, percentile, levelled)
             if not isinstance(ring, str):
                 found = ring
                 break
@@ -575,11 +679,11 @@ def measure_candidate(
     return _describe(luminance, clipped_mask, found, min_noise, min_diameter_px)
 
 
-def _two_passes(luminance, center_xy, radius, reach, core_rel, percentile=90):
+def _two_passes(luminance, center_xy, radius, reach, core_rel, percentile=90, levelled=None):
     """:func:`_closed_outline` with the candidate's size, then with the measured one."""
     found = None
     for _ in range(2):
-        found = _closed_outline(luminance, center_xy, radius, 1.3 * reach + 2.0, core_rel, percentile)
+        found = _closed_outline(luminance, center_xy, radius, 1.3 * reach + 2.0, core_rel, percentile, levelled)
         if isinstance(found, str):
             return found
         (r0, c0, _, _), _, _, outline, merged, _, _ = found
@@ -627,7 +731,7 @@ def _describe(luminance, clipped_mask, found, min_noise, min_diameter_px) -> Mea
             unseen |= _near(ring & clipped_crop, outline, UNSEEN_MARGIN_PX)
     from_centre = _window_distance(crop.shape, cx, cy) / max(0.5 * diameter, 1e-6)
     centre, rim = crop[from_centre <= RING_CENTRE_REL], crop[(from_centre >= RING_RIM_REL[0]) & (from_centre <= RING_RIM_REL[1])]
-    is_ring = bool(centre.size and rim.size) and float(np.median(rim) - np.median(centre)) > RING_DIP * contrast
+    is_ring = bool(centre.size and rim.size) and float(_median(rim) - _median(centre)) > RING_DIP * contrast
     thickness = _thickness(blob, 0.5 * diameter)
     depth = max(OVERLAP_DEFECT_MIN_PX, OVERLAP_DEFECT_DEPTH * 0.5 * diameter)
     merged = merged or 2 <= _deep_concavities(outline, depth) <= 4

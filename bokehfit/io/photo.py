@@ -34,10 +34,13 @@ Hostile and damaged files
   scaled so that it is 1; samples still above :data:`FLOAT_SAMPLE_MAX` are
   clamped there and marked in ``clipped``. Each of these is counted in a note.
 
-Speed: 8-bit files decode with OpenCV (libjpeg-turbo, libpng) and are
-linearised with a 256-entry table per channel (``cv2.LUT``) and one weighted
-channel sum (``cv2.transform``), in blocks of rows, all in float32: a
-24-megapixel JPEG takes well under a second on two cores.
+Speed and memory: 8-bit files decode with OpenCV (libjpeg-turbo, libpng) and
+are linearised with a 256-entry table per channel (``cv2.LUT``) and one weighted
+channel sum (``cv2.transform``), in blocks of rows, all in float32. A JPEG is
+decoded straight into the array that then becomes the display (its channels put
+in RGB order in place, block by block), so a photo holds 8 bytes a pixel
+(luminance 4, display 3, clipped mask 1) and loading one peaks little above
+that: a 24-megapixel JPEG takes about 1.5 times a bare ``cv2.imread`` of it.
 """
 
 from __future__ import annotations
@@ -97,7 +100,7 @@ RAW_SUFFIXES = frozenset(
     " .kdc .dcr .rwl .raw".split()
 )
 #: Rows per block when linearising: keeps the float32 temporaries small.
-_BLOCK_ROWS = 256
+_BLOCK_ROWS = 64
 #: Largest metadata block read (bytes, after decompression): an ICC profile or an EXIF block.
 #: Real ones are a few kB to a few hundred kB; larger ones are skipped with a note.
 METADATA_MAX_BYTES = 4 << 20
@@ -395,29 +398,51 @@ def _library_messages():
             lines.extend(line.strip() for line in text.splitlines() if line.strip())
 
 
-def _imdecode(data: bytes) -> tuple[np.ndarray | None, list[str]]:
+def _imdecode(data: bytes, path: Path | None = None, shape: tuple[int, ...] | None = None):
     """``cv2.imdecode`` as stored (no orientation, native depth), and the decoder's messages.
 
     libjpeg/libpng/libtiff complaints would go to stderr, through OpenCV's logger or the
     libraries' own ``fprintf``; they are returned instead, for our own one-line note or
     ``InputError``. The log level is restored afterwards.
+
+    With ``path`` and the ``shape`` its header gives (8-bit samples), the file is decoded
+    straight into an array of that shape (``cv2.imread`` with ``dst``): ``cv2.imdecode``
+    hands its result over as a copy, twice the image's memory at the peak. Where that
+    read fails or cannot be tried (a name OpenCV cannot open or take), ``data`` is decoded
+    instead.
     """
     import cv2
 
+    flags = cv2.IMREAD_UNCHANGED | cv2.IMREAD_IGNORE_ORIENTATION
     level = cv2.utils.logging.getLogLevel()
     cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
     pixels = None
     try:
+        name = os.fspath(path) if path is not None and shape is not None else None
+        if name is not None and _utf8(name):  # OpenCV's bindings crash on a name that is not valid text
+            with _library_messages() as messages:
+                try:
+                    pixels = cv2.imread(name, np.empty(shape, dtype=np.uint8), flags)
+                except cv2.error:
+                    pixels = None
+            if pixels is not None and pixels.size:
+                return pixels, messages
         with _library_messages() as messages:
             try:
-                pixels = cv2.imdecode(
-                    np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED | cv2.IMREAD_IGNORE_ORIENTATION
-                )
+                pixels = cv2.imdecode(np.frombuffer(data, np.uint8), flags)
             except cv2.error:
                 pixels = None
     finally:
         cv2.utils.logging.setLogLevel(level)
     return pixels, messages
+
+
+def _utf8(name: str) -> bool:
+    try:
+        name.encode("utf-8")
+    except UnicodeEncodeError:  # undecodable bytes of the file system's name, kept as surrogates
+        return False
+    return True
 
 
 def _fill_start_row(pixels: np.ndarray) -> int:
@@ -469,7 +494,8 @@ def _frozen(array: np.ndarray) -> np.ndarray:
 def _linearise_integer(pixels: np.ndarray, bits: int, order: str, encoding: Encoding, bar: _Progress):
     """Luminance, clipped mask and 8-bit RGB display of an oriented uint8/uint16 image.
 
-    ``pixels`` is (H, W) grey or (H, W, 3) in channel order ``order`` ("RGB" or "BGR").
+    ``pixels`` is (H, W) grey or (H, W, 3) in channel order ``order`` ("RGB" or "BGR"). An
+    8-bit colour image becomes the display: its channels are put in RGB order in place.
     """
     import cv2
 
@@ -513,8 +539,12 @@ def _linearise_integer(pixels: np.ndarray, bits: int, order: str, encoding: Enco
         np.bitwise_or(at_top[..., 0], at_top[..., 1], out=mask)
         np.bitwise_or(mask, at_top[..., 2], out=mask)
         bar.step("linearise")
-    display8 = pixels if bits == 8 else cv2.convertScaleAbs(pixels, alpha=1.0 / 257.0)
-    display = cv2.cvtColor(display8, cv2.COLOR_BGR2RGB) if order == "BGR" else np.ascontiguousarray(display8)
+    # The display is the decoded image itself, not a copy of it: its channels are swapped in
+    # place, a block at a time (OpenCV copies a whole source that is also the destination).
+    display = np.ascontiguousarray(pixels if bits == 8 else cv2.convertScaleAbs(pixels, alpha=1.0 / 257.0))
+    if order == "BGR":
+        for r0, r1 in _blocks(height):
+            cv2.cvtColor(display[r0:r1], cv2.COLOR_BGR2RGB, dst=display[r0:r1])
     bar.step("display")
     return luminance, clipped, display
 
@@ -631,7 +661,8 @@ def _load_jpeg(path: Path, data: bytes, max_pixels: int, progress: bool) -> Phot
             notes.append(note)
         else:
             encoding = _encoding_for(meta)
-            (pixels, messages), order = _imdecode(data), "BGR"
+            shape = (meta.height, meta.width) if components == 1 else (meta.height, meta.width, 3)
+            (pixels, messages), order = _imdecode(data, path, shape), "BGR"
         if pixels is None or pixels.shape[:2] != (meta.height, meta.width):
             raise InputError(f"{path.name} could not be decoded as a JPEG; re-export it")
         if pixels.ndim == 3 and pixels.shape[2] != 3:
