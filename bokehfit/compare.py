@@ -402,7 +402,9 @@ def _used_as(disc: Disc, fitted) -> str:
         return "plateau and outline"
     if fitted.censored:
         return f"outline (saturated: {fitted.censored} clipped pixels fitted as lower bounds)"
-    return "outline and profile (a ring: bright rim)" if disc.ring else "outline"
+    if disc.ring or disc.bright_centre:
+        return f"outline and profile ({'a ring: bright rim' if disc.ring else 'bright centre'})"
+    return "outline"
 
 
 def _round(value):

@@ -45,15 +45,9 @@ def _renders() -> list[str]:
     return sorted(_truth()["renders"])
 
 
-#: Known gap: ``find_discs`` rejects bright-centre discs (rim < 0: the edge is at a quarter of the
-#: peak at rim −0.6) as "soft edge". Strict, so the test says so once the finder takes them.
-BRIGHT_CENTRE_GAP = pytest.mark.xfail(
-    strict=True, reason="find_discs rejects bright-centre discs (rim < 0) as soft edges")
-
-
 def _files() -> list:
-    return [pytest.param(name, entry["file"], marks=[BRIGHT_CENTRE_GAP] if render["rim"] < 0 else [])
-            for name, render in sorted(_truth()["renders"].items()) for entry in render["files"]]
+    return [pytest.param(name, entry["file"]) for name, render in sorted(_truth()["renders"].items())
+            for entry in render["files"]]
 
 
 def test_every_listed_file_is_there_unchanged():

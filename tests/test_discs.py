@@ -185,6 +185,48 @@ def test_non_discs_are_rejected_with_reasons():
     assert "no disc among" in search.reason
 
 
+def radial_profile(width, height, centre, radius, profile, blur_px=1.0):
+    """An image of ``profile(r / radius)`` inside ``radius`` and 0 outside, sampled 4×4 per pixel and
+    blurred by ``blur_px``: made from the formula, not from bokehfit's kernels."""
+    sub = 4
+    rows, cols = np.indices((height * sub, width * sub), dtype=np.float64)
+    # pixel centres at integer coordinates (design.md §1)
+    rho = np.hypot((cols + 0.5) / sub - 0.5 - centre[0], (rows + 0.5) / sub - 0.5 - centre[1]) / radius
+    fine = np.where(rho <= 1.0, profile(np.minimum(rho, 1.0)), 0.0)
+    image = fine.reshape(height, sub, width, sub).mean(axis=(1, 3))
+    return cv2.GaussianBlur(image.astype(np.float32), (0, 0), blur_px)
+
+
+@pytest.mark.parametrize("fall", [0.6, 0.75, 0.85])
+def test_bright_centre_discs_are_measured_at_their_edge(fall):
+    """Centre bright, falling by ``fall`` of the peak towards the rim, then a step to the
+    background (the far side of an over-corrected lens): found at the step, not on the slope.
+    The edge lies at 40 %, 25 % and 15 % of the peak (design.md's rim −0.43, −0.6, −0.74)."""
+    image = np.full((200, 320), 0.02, dtype=np.float32)
+    centres = [(60.3, 60.7), (160.0, 100.4), (260.6, 140.2)]
+    for centre in centres:
+        image += radial_profile(320, 200, centre, 25.0, lambda rho: 0.6 * (1.0 - fall * rho**1.5))
+    image += np.random.default_rng(3).normal(0, 0.002, image.shape).astype(np.float32)
+    search = find_discs(image)
+    assert len(search) == 3, search.rejected
+    for disc in search.discs:
+        assert disc.bright_centre and not disc.ring and disc.evidence == "edge" and disc.usable
+        assert disc.diameter_px == pytest.approx(50.0, rel=0.03)
+        assert min(math.dist(disc.center_xy, c) for c in centres) < 0.5
+
+
+def test_cones_and_smooth_blobs_are_not_taken_for_bright_centres():
+    """No step at their edge: a cone (equally steep at every level) and a Gaussian (steepest at
+    0.61 of its peak) stay soft."""
+    image = np.full((200, 320), 0.02, dtype=np.float32)
+    image += radial_profile(320, 200, (80.0, 100.0), 40.0, lambda rho: 0.6 * (1.0 - rho))
+    image += gaussian_blob(320, 200, (230, 100), 16.0, 0.6)
+    image += np.random.default_rng(4).normal(0, 0.002, image.shape).astype(np.float32)
+    search = find_discs(image)
+    assert not search, [(d.center_xy, d.diameter_px) for d in search.discs]
+    assert search.rejected["soft edge"] == 2, search.rejected
+
+
 @pytest.mark.parametrize("level", [0.0, 1.0])
 def test_flat_images_have_no_discs(level):
     search = find_discs(np.full((64, 64), level, dtype=np.float32))

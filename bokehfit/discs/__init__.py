@@ -14,7 +14,7 @@ tens of thousands of small highlights costs a few seconds, not hours.
 
 Every disc says what it offers as evidence of the aperture's shape
 (``evidence``): ``"plateau"`` a clean disc (outline and interior), ``"edge"``
-its outline only (saturated, or a ring with a bright rim), ``"partial"`` part of
+its outline only (saturated, a ring with a bright rim, or a bright centre), ``"partial"`` part of
 its outline (cut by the frame, crossed by an occluder, overlapping other discs,
 or joined to other clipped light), with ``outline_seen``, the share of its
 outline that is its own and reliable, and ``outline_reliable`` per outline
@@ -101,7 +101,7 @@ class Disc:
     clipped: bool
     overlaps: bool
     resolvable: bool
-    #: What the disc offers: "plateau" (clean), "edge" (the outline only: saturated or a ring),
+    #: What the disc offers: "plateau" (clean), "edge" (the outline only: saturated, a ring or a bright centre),
     #: "partial" (part of the outline: cut, occluded, overlapping or joined by bloom).
     evidence: str = "plateau"
     #: Share of the outline that is the disc's own and reliable, 0–1.
@@ -111,6 +111,7 @@ class Disc:
     #: Shared by discs whose outlines overlap; None for a disc on its own.
     cluster: int | None = None
     ring: bool = False  #: rim brighter than the centre (soap-bubble disc)
+    bright_centre: bool = False  #: centre brighter than the rim, the edge a step below it (rim < 0)
     occluded: bool = False  #: crossed by a thin occluder (bridged, outline there not seen)
     clipped_share: float = 0.0  #: share of the disc's area clipped in the source
 
@@ -146,6 +147,7 @@ class Disc:
             "outline_seen": round(float(self.outline_seen), 3),
             "cluster": self.cluster,
             "ring": bool(self.ring),
+            "bright_centre": bool(self.bright_centre),
             "occluded": bool(self.occluded),
             "clipped_share": round(float(self.clipped_share), 4),
         }
@@ -440,7 +442,7 @@ def find_discs(
         seen = float(reliable.mean()) if len(reliable) else 0.0
         if seen < FULL_OUTLINE_SEEN:
             evidence = "partial"
-        elif m.saturated or m.ring:
+        elif m.saturated or m.ring or m.bright_centre:
             evidence = "edge"
         else:
             evidence = "plateau"
@@ -462,6 +464,7 @@ def find_discs(
                 outline_reliable=reliable,
                 cluster=cluster,
                 ring=m.ring,
+                bright_centre=m.bright_centre,
                 occluded=m.occluded,
                 clipped_share=m.clipped_share,
             )

@@ -63,6 +63,15 @@ What a kept disc offers (for the fit that comes later):
   outline is the disc's. A disc is flagged ``ring`` when the
   median of its centre (within ``RING_CENTRE_REL`` of the radius) lies below the
   plateau by more than ``RING_DIP`` of the contrast.
+- **Bright-centre discs** (rim < 0): the light falls from the centre to the
+  rim, then steps down. Where the step's top lies under half the peak, the
+  half-peak outline runs on the slope and its edge is soft; such a candidate is
+  searched for the step (``BRIGHT_CENTRE_LEVELS``) and, where there is one,
+  measured again at the step's middle and flagged ``bright_centre``. Found so
+  down to an edge at about 15 % of the peak (rim ≈ −0.74). Limits: with the
+  step's top just above half the peak the half-peak outline runs along it and
+  the disc comes out up to about 6 % small (the fit's pixel model then
+  measures it); below 15 % the step is lost in the slope ("soft edge").
 """
 
 from __future__ import annotations
@@ -157,6 +166,21 @@ RING_CORE_REL = 1.05
 #: median, whose half takes in the rim and the centre (lit too, only less): an outline a
 #: little outside the edge, but closed.
 RING_PLATEAU_PERCENTILES = (90, 50)
+#: Bright-centre discs (rim < 0, design.md §3b): the light falls from the centre towards the
+#: edge and then steps down to the background, so the half-peak contour lies on the slope,
+#: inside the disc, where the edge is soft. A "soft edge" candidate is searched for a step
+#: among the iso-contours at these shares of its contrast (median gradient along each). A step
+#: is steepest at its middle, and above its top only the slope of the centre is left: where the
+#: steepest contour lies at most BRIGHT_CENTRE_MAX_LEVEL up and is BRIGHT_CENTRE_STEEPER times
+#: steeper than every contour above the step (twice its level, plus BRIGHT_CENTRE_SHOULDER for
+#: the shoulder the blur rounds), the step is the disc's edge, and it is measured again with
+#: the top of the step as its plateau. A Gaussian blob's steepest contour is
+#: at e^−½ = 0.61 of its peak and a cone's are all equally steep: neither passes. (Cycles'
+#: bright-centre circle at rim −0.6: steepest at 0.15–0.2, 1.4–1.9 times those above the step.)
+BRIGHT_CENTRE_LEVELS = (0.06, 0.09, 0.12, 0.15, 0.2, 0.25, 0.3, 0.4, 0.5, 0.6)
+BRIGHT_CENTRE_MAX_LEVEL = 0.25
+BRIGHT_CENTRE_SHOULDER = 0.1
+BRIGHT_CENTRE_STEEPER = 1.3
 #: Gaps in a ring's rim up to this share of its radius on each side are closed (the rim of a
 #: real soap-bubble disc dims in places: a droplet's highlight is uneven).
 RING_GAP_REL = 0.15
@@ -223,6 +247,7 @@ class Measurement:
     outline_reliable: np.ndarray | None = None
     clipped_share: float = 0.0  #: share of the disc's area clipped in the source
     ring: bool = False  #: rim brighter than the centre (soap-bubble disc)
+    bright_centre: bool = False  #: centre brighter than the rim, edge a step below it (rim < 0)
     occluded: bool = False  #: a thin occluder bridged across the disc
     thickness: float = 1.0  #: largest inscribed radius over the equal-area radius
 
@@ -330,6 +355,7 @@ def _edge_gradient(crop: np.ndarray, outline: np.ndarray) -> float:
     gx_at = ndimage.map_coordinates(gx, coords, order=1, mode="nearest")
     gy_at = ndimage.map_coordinates(gy, coords, order=1, mode="nearest")
     return float(_median(np.hypot(gx_at, gy_at)))
+
 
 
 def _outline(crop: np.ndarray, level: float, background: float, seed_rc: tuple[float, float]) -> np.ndarray | None:
@@ -550,7 +576,7 @@ def _close_ring(crop, distance, level, plateau, radius):
     return raised, mask
 
 
-def _closed_outline(luminance, center_xy, radius, reach, core_rel=0.8, percentile=90, levelled=None):
+def _closed_outline(luminance, center_xy, radius, reach, core_rel=0.8, percentile=90, levelled=None, edge_rel=1.0):
     """Levels and the closed 50 % outline around ``center_xy``, growing the window
     while the outline runs into it; the last window masks beyond ``reach`` instead
     (the disc then touches a neighbour). The plateau is the ``percentile`` within
@@ -574,6 +600,7 @@ def _closed_outline(luminance, center_xy, radius, reach, core_rel=0.8, percentil
         plane, (background, noise, ring_lift) = levelled[key]
         core = _levelled(crop, distance <= max(core_rel * radius, 0.75), plane)
         plateau = float(_percentile(core, percentile)) if core.size else background
+        plateau = background + edge_rel * (plateau - background)  # a bright centre's: the top of its edge
         level = background + 0.5 * (plateau - background)
         if not _contrast_ok(plateau - background, noise, background, 2.0 * radius):
             return "faint"
@@ -676,14 +703,49 @@ def measure_candidate(
                 break
     if isinstance(found, str):
         return found
-    return _describe(luminance, clipped_mask, found, min_noise, min_diameter_px)
+    measured = _describe(luminance, clipped_mask, found, min_noise, min_diameter_px)
+    if measured.reason == "soft edge":
+        step = _step_share(found)
+        if step is not None:  # a bright centre: measured again with the top of its edge as the plateau
+            (r0, c0, _, _), _, _, outline, _, _, _ = found
+            _, cx, cy = _polygon_area_centroid(outline)
+            reach = float(np.max(np.hypot(outline[:, 0] - cx, outline[:, 1] - cy)))
+            again = _two_passes(luminance, (cx + c0, cy + r0), reach, reach, 0.8, 90, levelled, 2.0 * step)
+            if not isinstance(again, str):
+                stepped = _describe(luminance, clipped_mask, again, min_noise, min_diameter_px)
+                if stepped.reason is None and stepped.diameter_px > measured.diameter_px:
+                    return replace(stepped, bright_centre=True)
+    return measured
 
 
-def _two_passes(luminance, center_xy, radius, reach, core_rel, percentile=90, levelled=None):
+def _step_share(found) -> float | None:
+    """The share of the contrast at the middle of a bright-centre disc's edge, or None.
+
+    ``found`` is a closed outline whose edge is soft; the iso-contours at
+    :data:`BRIGHT_CENTRE_LEVELS` around its centre are compared by their median
+    gradient (module constants). None where no level is markedly steeper low down:
+    no step, so no disc's edge.
+    """
+    _, crop, (background, plateau, _, _), outline, _, _, _ = found
+    contrast = plateau - background
+    _, cx, cy = _polygon_area_centroid(outline)
+    steepness = []
+    for share in BRIGHT_CENTRE_LEVELS:
+        contour = _outline(crop, background + share * contrast, background, (cy, cx))
+        steepness.append(0.0 if contour is None else _edge_gradient(crop, contour))
+    best = int(np.argmax(steepness))
+    share, steepest = BRIGHT_CENTRE_LEVELS[best], steepness[best]
+    if share > BRIGHT_CENTRE_MAX_LEVEL:
+        return None
+    above = max(s for level, s in zip(BRIGHT_CENTRE_LEVELS, steepness) if level >= 2.0 * share + BRIGHT_CENTRE_SHOULDER - 1e-9)
+    return share if steepest >= BRIGHT_CENTRE_STEEPER * above else None
+
+
+def _two_passes(luminance, center_xy, radius, reach, core_rel, percentile=90, levelled=None, edge_rel=1.0):
     """:func:`_closed_outline` with the candidate's size, then with the measured one."""
     found = None
     for _ in range(2):
-        found = _closed_outline(luminance, center_xy, radius, 1.3 * reach + 2.0, core_rel, percentile, levelled)
+        found = _closed_outline(luminance, center_xy, radius, 1.3 * reach + 2.0, core_rel, percentile, levelled, edge_rel)
         if isinstance(found, str):
             return found
         (r0, c0, _, _), _, _, outline, merged, _, _ = found

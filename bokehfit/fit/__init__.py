@@ -493,13 +493,13 @@ def _rim_signal(crop: DiscCrop, fit: PixelFit) -> float | None:
 
 def _feature_tests(fits: list[PixelFit], discs: list[Disc], screens: list[Screen], crops: list[DiscCrop]) -> tuple[str, ...]:
     """The §3b features worth testing on these discs: the rim where some disc is a ring (a bright rim)
-    or the flat model leaves the discs' rims brighter or darker than their centres (RIM_SIGNAL of the
+    or has a bright centre, or the flat model leaves the discs' rims brighter or darker than their centres (RIM_SIGNAL of the
     contrast, median over the discs that show a profile); the vignetting where at least 3 discs were
     fitted, some lie far enough from the centre to be cut (VIGNETTING_MIN_FIELD), and those misfit
     the shape more than the central ones do (or none is central)."""
     signals = [v for v in (_rim_signal(c, f) for c, f in zip(crops, fits)) if v is not None]
     profiled = bool(signals) and abs(float(np.median(signals))) >= RIM_SIGNAL
-    features = ["rim"] if profiled or any(d.ring for d in discs) else []
+    features = ["rim"] if profiled or any(d.ring or d.bright_centre for d in discs) else []
     field = np.array([math.hypot(*f.field_position) for f in fits])
     rms = np.array([s.rms for s in screens])
     outer, inner = rms[field >= VIGNETTING_MIN_FIELD], rms[field < VIGNETTING_MIN_FIELD]
