@@ -237,6 +237,16 @@ def test_cat_eye_discs_are_one_vignetting_not_a_new_aperture(name):
     true = render["vignetting"]
     assert fit.aperture.vignetting.radius == pytest.approx(true["radius"], abs=0.1)
     assert fit.aperture.vignetting.shift == pytest.approx(true["shift"], abs=0.2)
+    # The outlines are measured against the cut each disc shows: lemons match, so the fit can be sure.
+    assert fit.outline_misfit < 0.04, fit.outline_misfit
+
+
+def test_bright_centre_discs_give_a_negative_rim():
+    """The other side of the soap bubble: the discs are found at the step of their edge, the rim fitted below 0."""
+    render, fit = _fit("rim_dark_circle")
+    assert fit.aperture.is_circle, fit.message
+    assert all(item.disc.bright_centre for item in fit.disc_fits)
+    assert fit.aperture.rim == pytest.approx(render["rim"], abs=0.15)
 
 
 def test_soap_bubble_discs_give_a_positive_rim():

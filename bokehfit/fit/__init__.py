@@ -46,7 +46,7 @@ from bokehfit.errors import InputError
 from bokehfit.fit.families import FAMILIES, Family, families_for
 from bokehfit.fit.pixels import FIT_BOUNDS, DiscCrop, PixelFit, crop_disc, fit_discs, render_disc_model
 from bokehfit.fit.result import FailedFit, FitFailedError, FitOptions, Parameter
-from bokehfit.fit.signature import Screen, screen
+from bokehfit.fit.signature import Screen, outline_misfit, screen
 
 __all__ = [
     "ApertureFit",
@@ -676,6 +676,9 @@ def fit_aperture(
     winner_model = _combine(winner, [final[i] for i in kept], [winner_screens[i] for i in kept])
     if winner_model.angle_deg is not None:  # every disc shares the joint aperture: its angle, not a mean of copies
         winner_model = dataclasses.replace(winner_model, angle_deg=joint.aperture.canonical_angle_deg)
+    if seen_aperture.vignetting is not None:  # the outlines against the cut each disc shows, not the whole shape
+        misfits = [outline_misfit(disc_fits[i].disc.outline_xy, seen_aperture, final[i].field_position) for i in kept]
+        winner_model = dataclasses.replace(winner_model, screen_rms=float(np.median(misfits)))
     models = [
         dataclasses.replace(winner_model if m.family is winner else m, bic=m.bic, delta_bic=m.bic - best_bic)
         for m in models

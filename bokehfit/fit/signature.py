@@ -20,7 +20,7 @@ import numpy as np
 from bokehfit.apertures import Aperture, image_to_aperture
 from bokehfit.fit.families import Family
 
-__all__ = ["SAMPLES", "Screen", "radial_signature", "screen"]
+__all__ = ["SAMPLES", "Screen", "outline_misfit", "radial_signature", "screen"]
 
 #: Angles of the radial signature (0.5° apart).
 SAMPLES = 720
@@ -45,7 +45,12 @@ class Screen:
 
 def radial_signature(outline_xy: np.ndarray) -> np.ndarray:
     """r(θ) / r_eq of a closed outline (image (column, row) points) about its centroid, on the SAMPLES angles (y up)."""
-    x, y = image_to_aperture(np.asarray(outline_xy, dtype=np.float64)[:, ::-1]).T
+    return _signature(image_to_aperture(np.asarray(outline_xy, dtype=np.float64)[:, ::-1]))
+
+
+def _signature(points: np.ndarray) -> np.ndarray:
+    """r(θ) / r_eq about the centroid of a closed polygon of (x, y) points in the aperture frame."""
+    x, y = points.T
     x1, y1 = np.roll(x, -1), np.roll(y, -1)
     cross = x * y1 - x1 * y
     area = 0.5 * cross.sum()
@@ -61,6 +66,21 @@ def radial_signature(outline_xy: np.ndarray) -> np.ndarray:
 def _model_signature(aperture: Aperture) -> np.ndarray:
     """r(θ) / r_eq of the unit-area aperture at angle 0 (:meth:`Aperture.outline_radius`)."""
     return aperture.outline_radius(_THETA) * np.sqrt(np.pi)
+
+
+def outline_misfit(outline_xy: np.ndarray, aperture: Aperture, field_position=None) -> float:
+    """RMS misfit (equal-area radii) of a disc's outline to ``aperture`` as a disc at ``field_position``
+    shows it (cut by its vignetting there), at the best rotation: the screen's score for one aperture."""
+    observed = radial_signature(outline_xy)
+    if aperture.vignetting is None or field_position is None:
+        return _best_shift(observed, _model_signature(aperture))[1]
+    # The cut outline: its largest loop, resampled evenly along its length (a straight side is one point).
+    loop = max(aperture.outline(field_position).polylines(1e-4), key=len)
+    closed = np.vstack([loop, loop[:1]])
+    along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(closed, axis=0).T))])
+    t = np.linspace(0.0, along[-1], 4 * SAMPLES, endpoint=False)
+    dense = np.column_stack([np.interp(t, along, closed[:, 0]), np.interp(t, along, closed[:, 1])])
+    return _best_shift(observed, _signature(dense))[1]
 
 
 def _best_shift(observed: np.ndarray, model: np.ndarray) -> tuple[float, float]:
