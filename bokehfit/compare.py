@@ -25,6 +25,7 @@ from bokehfit.errors import InputError
 from bokehfit.fit import LENS_FEATURES, ApertureFit, FailedFit, FitOptions, fit_aperture
 from bokehfit.gpu import AdapterChoice
 from bokehfit.io import Photo, load_photo
+from bokehfit.io.colour import luminance_weights
 from bokehfit.kernels import AUTO, Kernel, compute_kernel
 from bokehfit.kernels.exact import coverage
 from bokehfit.metrics import METRICS, angle_error, compare_outlines
@@ -378,6 +379,9 @@ def _describe(aperture: dict) -> str:
     if aperture.get("vignetting"):
         cut = aperture["vignetting"]
         features.append(f"cat-eye vignetting (barrel radius {cut['radius']:.2f}, shift {cut['shift']:+.2f})")
+    if aperture.get("chromatic"):
+        colour = aperture["chromatic"]
+        features.append(f"chromatic (red disc {100 * colour['red']:+.1f} %, blue {100 * colour['blue']:+.1f} % of green's)")
     return name + "".join(f", {feature}" for feature in features)
 
 
@@ -552,8 +556,10 @@ def estimate_fstop(
 
 
 def _kernel_outline(kernel: Kernel) -> np.ndarray:
-    """The kernel's 50 % outline as (x, y) = (column, row) points."""
-    return _half_outline(kernel.image, kernel.diameter_px)
+    """The kernel's 50 % outline as (x, y) = (column, row) points: a chromatic kernel's luminance,
+    which the discs' outlines were measured in (the channels with sRGB's weights, summing to 1)."""
+    image = kernel.image if kernel.image.ndim == 2 else kernel.image @ np.asarray(luminance_weights("sRGB"), np.float32)
+    return _half_outline(image, kernel.diameter_px)
 
 
 def _half_outline(image: np.ndarray, diameter_px: float) -> np.ndarray:
@@ -585,7 +591,8 @@ def disc_metrics(comparison_fit: ApertureFit, kernel_outline: np.ndarray) -> dic
     seen = comparison_fit.seen_angle_deg
     for item in comparison_fit.disc_fits:
         fitted = item.fits[comparison_fit.family.name]
-        own = fitted.aperture != comparison_fit.seen_aperture or fitted.aperture.vignetting is not None
+        # the kernel's colours do not change its (luminance) outline
+        own = fitted.aperture != comparison_fit.seen_aperture.replace(chromatic=None) or fitted.aperture.vignetting is not None
         reference = _shown_outline(fitted, comparison_fit.diameter_px) if own else kernel_outline
         values = compare_outlines(
             resample(item.disc.outline_xy, METRIC_POINTS), reference, rotation_within_deg=ALIGNMENT_SEARCH_DEG
@@ -644,7 +651,7 @@ def compare_photo(
     timing["detect"] = search.time_s
     notify("fit")
     fit = fit_aperture(photo.luminance, search.discs, shapes=shapes, focus_side=focus_side, options=fit_options,
-                       progress=progress, clipped=photo.clipped)
+                       progress=progress, clipped=photo.clipped, rgb=photo.linear_rgb)
     timing["fit"] = fit.time_s
     kernel = None
     fstop = FStop(None, None, "no aperture was fitted", size_convention, lens_model, exif_fnumber=photo.exif.fnumber)

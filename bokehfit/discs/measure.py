@@ -89,6 +89,7 @@ from bokehfit.discs.candidates import LARGE_DISC_PX, MIN_CONTRAST_ABS, contrast_
 __all__ = [
     "Measurement",
     "measure_candidate",
+    "outline_diameter",
     "split_cluster",
     "MIN_SNR",
     "MIN_SOLIDITY",
@@ -739,6 +740,33 @@ def _step_share(found) -> float | None:
         return None
     above = max(s for level, s in zip(BRIGHT_CENTRE_LEVELS, steepness) if level >= 2.0 * share + BRIGHT_CENTRE_SHOULDER - 1e-9)
     return share if steepest >= BRIGHT_CENTRE_STEEPER * above else None
+
+
+def outline_diameter(image: np.ndarray, center_xy: tuple[float, float], diameter_px: float) -> float | None:
+    """Equal-area diameter of the 50 % outline of a plateau disc of about ``diameter_px`` at ``center_xy``
+    in ``image`` (one channel of linear light), with the levels of the module's Notes; None where the
+    disc does not stand ``MIN_SNR`` noise levels out of its surround there or has no closed outline.
+
+    For measures of a disc already found, in another image of the same scene: the colour channels.
+    """
+    radius = max(1.0, 0.5 * diameter_px)
+    window, distance = _window(image, center_xy, int(math.ceil(1.7 * radius + 4.0)))
+    r0, c0, r1, c1 = window
+    crop = image[r0:r1, c0:c1]
+    levels = _annulus_levels(crop, distance, radius)
+    if levels is None:
+        return None
+    plane, (background, noise, _) = levels
+    core = _levelled(crop, distance <= max(0.8 * radius, 0.75), plane)
+    plateau = float(_percentile(core, 90)) if core.size else background
+    if not plateau - background >= MIN_SNR * noise or plateau <= background:
+        return None
+    if plane is not None:
+        crop = crop - plane.over(crop.shape)
+    outline = _outline(crop, background + 0.5 * (plateau - background), background, (center_xy[1] - r0, center_xy[0] - c0))
+    if outline is None or _open_in_window(outline, crop.shape, window, image.shape):
+        return None
+    return 2.0 * math.sqrt(_polygon_area_centroid(outline)[0] / math.pi)
 
 
 def _two_passes(luminance, center_xy, radius, reach, core_rel, percentile=90, levelled=None, edge_rel=1.0):

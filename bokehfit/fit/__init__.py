@@ -35,6 +35,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import cv2
@@ -46,6 +47,7 @@ from bokehfit.errors import InputError
 from bokehfit.fit.families import FAMILIES, Family, families_for
 from bokehfit.fit.pixels import FIT_BOUNDS, DiscCrop, PixelFit, crop_disc, fit_discs, render_disc_model
 from bokehfit.fit.result import FailedFit, FitFailedError, FitOptions, Parameter
+from bokehfit.fit.chromatic import ChromaticMeasure, measure_chromatic
 from bokehfit.fit.signature import Screen, outline_misfit, screen
 
 __all__ = [
@@ -151,6 +153,8 @@ class ApertureFit:
     #: One standard deviation of each shared aperture parameter of the joint fit, by name.
     feature_uncertainty: dict = dataclasses.field(default_factory=dict)
     notes: tuple = ()  #: models set aside and why (an elongation the discs do not share)
+    #: What the discs' colours said (None where fewer than three could be measured, or no colour given).
+    chromatic_measure: ChromaticMeasure | None = None
     success = True
 
     def __bool__(self) -> bool:
@@ -199,7 +203,11 @@ class ApertureFit:
         if aperture.vignetting is not None:
             vignetting = Parameter("vignetting", {"radius": aperture.vignetting.radius, "shift": aperture.vignetting.shift},
                                    {"radius": sigma.get("vignetting_radius"), "shift": sigma.get("vignetting_shift")})
-        features = {"roundness": roundness, "rim": rim, "vignetting": vignetting}
+        chromatic = None
+        if aperture.chromatic is not None:
+            chromatic = Parameter("chromatic", {"red": aperture.chromatic.red, "blue": aperture.chromatic.blue},
+                                  {"red": sigma.get("chromatic_red"), "blue": sigma.get("chromatic_blue")})
+        features = {"roundness": roundness, "rim": rim, "vignetting": vignetting, "chromatic": chromatic}
         return {
             "angle_deg": Parameter("angle_deg", angle, self.angle_uncertainty_deg if angle is not None else None),
             "diameter_px": Parameter("diameter_px", self.diameter_px, self.diameter_uncertainty_px),
@@ -517,6 +525,7 @@ def fit_aperture(
     options: FitOptions | None = None,
     progress=None,
     clipped: np.ndarray | None = None,
+    rgb: Callable[[slice, slice], np.ndarray] | None = None,
 ) -> ApertureFit | FailedFit:
     """Fit one aperture to the discs (see the module notes).
 
@@ -537,6 +546,10 @@ def fit_aperture(
     clipped : ndarray of shape (M, N), bool, optional
         Pixels clipped in the source (:attr:`bokehfit.io.Photo.clipped`): fitted
         as lower bounds, so saturated discs give their outlines.
+    rgb : callable, optional
+        ``rgb(rows, cols)``: a window of the photo in linear RGB, (h, w, 3)
+        (:meth:`bokehfit.io.Photo.linear_rgb`). With it the discs' colours are
+        measured for the chromatic aberration (:mod:`bokehfit.fit.chromatic`).
 
     Returns
     -------
@@ -707,6 +720,11 @@ def fit_aperture(
     angle_uncertainty = winner_model.angle_uncertainty_deg
     if angle_uncertainty is not None and math.isfinite(joint.uncertainty.get("angle_deg", math.nan)):
         angle_uncertainty = math.hypot(angle_uncertainty, joint.uncertainty["angle_deg"])
+    uncertainty = dict(joint.uncertainty)
+    colours = None if rgb is None else measure_chromatic(rgb, [chosen[i] for i in kept], luminance.shape)
+    if colours is not None and colours.significant:
+        seen_aperture = seen_aperture.replace(chromatic=colours.chromatic)
+        uncertainty.update(chromatic_red=colours.uncertainty.red, chromatic_blue=colours.uncertainty.blue)
     aperture = seen_aperture.near() if focus_side == "near" else seen_aperture
     seen_angle = seen_aperture.canonical_angle_deg
     edges = sum(chosen[i].evidence == "edge" for i in kept)
@@ -721,6 +739,7 @@ def fit_aperture(
         + "; "
         + (f"ΔBIC {margin:.0f} over {runner_up.family.name}" if runner_up is not None else "one model tried")
         + (f"; with {', '.join(features)}" if features else "")
+        + (f"; chromatic {colours.describe()}" if colours is not None and colours.significant else "")
         + "".join(f"; {note}" for note in notes)
         + ("" if sure or notes else " (unsure: the runner-up is close)")
     )
@@ -741,6 +760,7 @@ def fit_aperture(
         seen_aperture=seen_aperture,
         rejected=rejected,
         feature_tests=feature_tests,
-        feature_uncertainty=dict(joint.uncertainty),
+        feature_uncertainty=uncertainty,
         notes=tuple(notes),
+        chromatic_measure=colours,
     )

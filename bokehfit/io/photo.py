@@ -64,6 +64,7 @@ from bokehfit.io.colour import (
     linear_encoding,
     luminance_weights,
     named_encoding,
+    srgb_decode,
     srgb_display_lut,
 )
 from bokehfit.io.exif import (
@@ -165,6 +166,9 @@ class Photo:
     notes : tuple of str
         One line each about what was done to read a file that was not clean: a damaged JPEG,
         a CMYK conversion, masked float samples, skipped metadata.
+    display_decoding : ndarray of shape (256, 3), float32, or None
+        Linear light of each 8-bit code of ``display``, per channel (the file's own curves, or
+        sRGB's for the displays bokehfit encoded); None means sRGB. See :meth:`linear_rgb`.
     """
 
     path: Path
@@ -178,6 +182,18 @@ class Photo:
     linearisation: str
     colour_space: str
     notes: tuple[str, ...] = ()
+    display_decoding: np.ndarray | None = field(default=None, repr=False)
+
+    def linear_rgb(self, rows: slice, cols: slice) -> np.ndarray:
+        """Linear RGB (float32, (h, w, 3), 1.0 = white) of a window of the photo.
+
+        Decoded from the 8-bit ``display`` on demand, a window at a time (the whole photo in
+        float RGB would be 12 bytes a pixel): for measures in the colour channels of small
+        regions, such as a disc's colours (:func:`bokehfit.fit.chromatic.measure_chromatic`).
+        """
+        table = self.display_decoding if self.display_decoding is not None else _srgb_decoding()
+        codes = self.display[rows, cols]
+        return np.stack([table[codes[..., c], c] for c in range(3)], axis=-1)
 
     def input_json(self) -> dict:
         """The ``input`` object of design.md §7 (plus ``colour_space``), in plain JSON types."""
@@ -675,7 +691,8 @@ def _load_jpeg(path: Path, data: bytes, max_pixels: int, progress: bool) -> Phot
     finally:
         bar.close()
     return _photo(
-        path, luminance, clipped, display, False, exif, encoding.describe(), encoding.colour_space, notes
+        path, luminance, clipped, display, False, exif, encoding.describe(), encoding.colour_space, notes,
+        decoding=encoding.lut(8),
     )
 
 
@@ -733,7 +750,12 @@ def _encoding_for(meta: _Meta) -> Encoding:
     )
 
 
-def _photo(path, luminance, clipped, display, raw, exif, linearisation, colour_space, notes=()) -> Photo:
+def _srgb_decoding() -> np.ndarray:
+    """The linear value of every 8-bit sRGB code, per channel: (256, 3) float32."""
+    return np.repeat(srgb_decode(np.arange(256) / 255.0).astype(np.float32)[:, None], 3, axis=1)
+
+
+def _photo(path, luminance, clipped, display, raw, exif, linearisation, colour_space, notes=(), decoding=None) -> Photo:
     height, width = luminance.shape
     return Photo(
         path=path,
@@ -747,6 +769,7 @@ def _photo(path, luminance, clipped, display, raw, exif, linearisation, colour_s
         linearisation=linearisation,
         colour_space=colour_space,
         notes=tuple(notes),
+        display_decoding=decoding,
     )
 
 
@@ -854,7 +877,8 @@ def _load_png(path: Path, data: bytes, max_pixels: int, progress: bool) -> Photo
     finally:
         bar.close()
     return _photo(
-        path, luminance, clipped, display, False, exif, encoding.describe(), encoding.colour_space, meta.notes
+        path, luminance, clipped, display, False, exif, encoding.describe(), encoding.colour_space, meta.notes,
+        decoding=encoding.lut(8),
     )
 
 
@@ -919,7 +943,8 @@ def _load_tiff(path: Path, data: bytes, max_pixels: int, progress: bool) -> Phot
         finally:
             bar.close()
     return _photo(
-        path, luminance, clipped, display, False, exif, encoding.describe(), encoding.colour_space, meta.notes
+        path, luminance, clipped, display, False, exif, encoding.describe(), encoding.colour_space, meta.notes,
+        decoding=encoding.lut(8),
     )
 
 

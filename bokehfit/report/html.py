@@ -259,6 +259,8 @@ def build_html(comparison: Comparison, command_line: str) -> str:
         peak = float(kernel.max())
         zoom = max(1, KERNEL_VIEW_PX // kernel.shape[0])
         kernel8 = np.round(kernel / peak * 255).astype(np.uint8)
+        if kernel8.ndim == 3:  # a chromatic kernel, RGB: the coloured rims show (OpenCV writes BGR)
+            kernel8 = np.ascontiguousarray(kernel8[..., ::-1])
         drawn = data["kernel"]
         angle = "" if drawn["angle_deg"] is None else f" at {drawn['angle_deg']:.2f}°"
         parts.append(

@@ -1,0 +1,106 @@
+"""Longitudinal chromatic aberration from the discs' colours (design.md §3b ``chromatic``).
+
+Notes
+-----
+A lens that brings red, green and blue to focus at different distances gives
+each colour its own defocus disc: the red and blue discs are larger or smaller
+than the green one, and the discs show coloured rims (magenta where red and blue
+are the larger, green or cyan the other way). ``chromatic`` is those diameters
+over green's, minus 1.
+
+Each fitted disc that is a clean plateau (not saturated: a clipped channel's
+half level is not its disc's, nor a ring or a bright centre, whose profiles
+differ between channels as much as their sizes) is measured in the red, green
+and blue channels of the photo in linear light, as the detection measures the
+luminance (:func:`bokehfit.discs.measure.outline_diameter`: background, plateau
+and the equal-area diameter of the 50 % outline), and gives d_R/d_G − 1 and
+d_B/d_G − 1. The photo's value is the median over the discs, its uncertainty
+the median's robust standard error (1.4826 · MAD · √(π/2) / √n). It is
+reported only where at least ``MIN_DISCS`` discs measure it and one channel's
+median lies ``MIN_SIGNIFICANCE`` standard errors and ``MIN_CHROMATIC`` from 0:
+a lens whose colours agree to a fraction of a percent has no chromatic model.
+
+The discs are measured in the frame they show (the seen side); the fit turns
+the sign with the rest of the aperture for a ``near`` focus side.
+
+Limits: the channels are read from the 8-bit display (the file's own curves
+undo its encoding). A JPEG with 4:2:0 chroma (most cameras' and editors')
+stores colour at half resolution, so the red and blue edges follow the
+luminance's in part and the values come out smaller by up to about a third
+(``tests/test_chromatic.py``). Discs whose channels differ in profile as well
+as size (spherochromatism: a green rim around a magenta centre) give the sizes
+of their 50 % outlines, which is what their coloured rims show.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from bokehfit.apertures import Chromatic
+from bokehfit.discs import Disc
+from bokehfit.discs.measure import outline_diameter
+
+__all__ = ["ChromaticMeasure", "measure_chromatic", "MIN_DISCS", "MIN_SIGNIFICANCE", "MIN_CHROMATIC"]
+
+#: Fewest discs measured in all three channels for a value.
+MIN_DISCS = 3
+#: A channel's median must lie this many robust standard errors from 0 ...
+MIN_SIGNIFICANCE = 3.0
+#: ... and at least this far (0.5 % of the diameter: a tenth of a pixel on a 20-px disc).
+MIN_CHROMATIC = 0.005
+#: The window read around a disc: this share of its diameter beyond the detection's annulus.
+_WINDOW_REL = 1.0
+
+
+@dataclass(frozen=True)
+class ChromaticMeasure:
+    """What the discs' colours say: the value, its uncertainty, and how many discs gave it."""
+
+    chromatic: Chromatic  #: median red and blue diameter ratios, minus 1
+    uncertainty: Chromatic  #: one robust standard error of each
+    discs: int  #: discs measured in all three channels
+    significant: bool  #: the module's criteria are met: the photo shows chromatic aberration
+
+    def describe(self) -> str:
+        return (f"red {100 * self.chromatic.red:+.1f} % ± {100 * self.uncertainty.red:.1f}, blue "
+                f"{100 * self.chromatic.blue:+.1f} % ± {100 * self.uncertainty.blue:.1f} from {self.discs} discs")
+
+
+def measure_chromatic(rgb: Callable[[slice, slice], np.ndarray], discs: Sequence[Disc],
+                      shape: tuple[int, int]) -> ChromaticMeasure | None:
+    """Measure the chromatic aberration of ``discs`` in the linear RGB of the photo.
+
+    ``rgb(rows, cols)`` returns a window of the photo as linear RGB, float (h, w, 3)
+    (:meth:`bokehfit.io.Photo.linear_rgb`); ``shape`` is the photo's (height, width).
+    None where fewer than :data:`MIN_DISCS` discs can be measured in every channel.
+    """
+    height, width = shape
+    ratios = []
+    for disc in discs:
+        if disc.evidence != "plateau" or disc.saturated or disc.ring or disc.bright_centre:
+            continue
+        half = int(math.ceil((1.7 + _WINDOW_REL) * 0.5 * disc.diameter_px + 6.0))
+        col, row = int(round(disc.center_xy[0])), int(round(disc.center_xy[1]))
+        r0, c0 = max(0, row - half), max(0, col - half)
+        r1, c1 = min(height, row + half + 1), min(width, col + half + 1)
+        window = np.asarray(rgb(slice(r0, r1), slice(c0, c1)), dtype=np.float32)
+        centre = (disc.center_xy[0] - c0, disc.center_xy[1] - r0)
+        sizes = [outline_diameter(np.ascontiguousarray(window[..., c]), centre, disc.diameter_px) for c in range(3)]
+        if any(size is None for size in sizes):
+            continue
+        red, green, blue = sizes
+        ratios.append((red / green - 1.0, blue / green - 1.0))
+    if len(ratios) < MIN_DISCS:
+        return None
+    values = np.asarray(ratios)
+    median = np.median(values, axis=0)
+    spread = 1.4826 * np.median(np.abs(values - median), axis=0)
+    # the median's standard error: √(π/2) that of a mean; a floor for discs that agree exactly
+    error = np.maximum(spread * math.sqrt(math.pi / 2.0) / math.sqrt(len(values)), 1e-4)
+    significant = bool(np.any((np.abs(median) >= MIN_SIGNIFICANCE * error) & (np.abs(median) >= MIN_CHROMATIC)))
+    return ChromaticMeasure(Chromatic(float(median[0]), float(median[1])), Chromatic(float(error[0]), float(error[1])),
+                            len(values), significant)
