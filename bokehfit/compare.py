@@ -19,7 +19,7 @@ from skimage import measure
 
 from bokehfit import __version__
 from bokehfit.apertures import Aperture
-from bokehfit.discs import DEFAULT_MIN_DIAMETER_PX, USABLE_EVIDENCE, Disc, DiscSearch, find_discs
+from bokehfit.discs import DEFAULT_MIN_DIAMETER_PX, MIN_FIT_SEEN, Disc, DiscSearch, find_discs
 from bokehfit.discs.measure import RESOLVABLE_PX
 from bokehfit.errors import InputError
 from bokehfit.fit import LENS_FEATURES, ApertureFit, FailedFit, FitOptions, fit_aperture
@@ -392,10 +392,13 @@ def evidence_words(delta_bic: float) -> str:
 
 def disc_problems(disc: Disc) -> list[str]:
     """Why a disc is not usable, in words shared by ``discs`` and ``compare`` (empty when usable)."""
-    problems = [word for word, flag in (("cut by the frame", disc.clipped), ("overlapping", disc.overlaps)) if flag]
+    if disc.usable:
+        return []
+    problems = [word for word, flag in (("cut by the frame", disc.clipped), ("crossed by an occluder", disc.occluded))
+                if flag]
     if not disc.resolvable:
         problems.append(f"under {RESOLVABLE_PX:g} px")
-    if disc.evidence not in USABLE_EVIDENCE:
+    if disc.outline_seen < MIN_FIT_SEEN:
         problems.append(f"only {disc.outline_seen:.0%} of its outline is its own")
     return problems
 
@@ -408,6 +411,8 @@ def _used_as(disc: Disc, fitted) -> str:
         return f"outline (saturated: {fitted.censored} clipped pixels fitted as lower bounds)"
     if disc.ring or disc.bright_centre:
         return f"outline and profile ({'a ring: bright rim' if disc.ring else 'bright centre'})"
+    if disc.evidence == "partial" or disc.overlaps:
+        return f"its own part ({disc.outline_seen:.0%} of the outline; the other light left out)"
     return "outline"
 
 

@@ -254,3 +254,18 @@ def test_soap_bubble_discs_give_a_positive_rim():
     render, fit = _fit("rim_bright_circle")
     assert fit.aperture.is_circle, fit.message
     assert fit.aperture.rim == pytest.approx(render["rim"], abs=0.15)
+
+
+def test_overlapping_saturated_discs_are_fitted_from_their_own_parts():
+    """The two lights of the saturated render whose discs overlap: fitted alone, each with the other's
+    light left out and its clipped pixels as lower bounds, they give the blade count and the angle."""
+    from bokehfit.fit import fit_aperture
+
+    render = _truth()["renders"]["ngon6_round0_angle50_saturated"]
+    photo = load_photo(DATA / render["files"][0]["file"])
+    search = find_discs(photo.luminance, photo.clipped)
+    overlapping = [d for d in search.discs if d.usable and d.evidence == "partial"]
+    assert len(overlapping) >= 2, [(d.evidence, round(d.outline_seen, 2)) for d in search.discs]
+    fit = fit_aperture(photo.luminance, overlapping, clipped=photo.clipped)
+    assert fit.aperture.blades == render["blades"], fit.message
+    assert _angle_error(fit.aperture.angle_deg, render["angle_deg"], 60.0) < FIT_ANGLE_TOL_DEG

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from bokehfit.apertures import SHAPES
-from bokehfit.discs import find_discs
+from bokehfit.discs import MIN_FIT_SEEN, find_discs
 from bokehfit.errors import InputError
 from bokehfit.synthetic import SyntheticDisc, encode_srgb8, render_discs
 
@@ -160,7 +160,8 @@ def test_overlapping_discs_are_flagged():
     truth = [SyntheticDisc((80.0, 80.0), 60, "circle"), SyntheticDisc((125.0, 82.0), 60, "circle", brightness=0.6)]
     search = find_discs(render_discs(220, 170, truth, noise_sigma=0.002))
     assert search.discs and all(d.overlaps for d in search.discs)
-    assert not any(d.usable for d in search.discs)
+    # usable (fitted with the other's light left out) only with enough of the outline its own
+    assert all(d.usable == (d.outline_seen >= MIN_FIT_SEEN) for d in search.discs)
 
 
 def test_star_is_not_taken_for_overlapping_discs():

@@ -20,7 +20,7 @@ import cv2
 import numpy as np
 import pytest
 
-from bokehfit.discs import FULL_OUTLINE_SEEN, find_discs
+from bokehfit.discs import FULL_OUTLINE_SEEN, MIN_FIT_SEEN, find_discs
 
 DIAMETER_TOL_REL = 0.03
 CENTRE_TOL_PX = 1.0
@@ -119,11 +119,13 @@ def test_overlapping_discs_are_split_into_a_cluster():
     for disc, centre in zip(found, centres):
         offset = math.hypot(disc.center_xy[0] - centre[0], disc.center_xy[1] - centre[1])
         assert offset <= 4.0, f"centre off by {offset:.1f} px"
-        assert disc.evidence == "partial" and disc.overlaps and not disc.usable
+        assert disc.evidence == "partial" and disc.overlaps
+        assert disc.usable == (disc.outline_seen >= MIN_FIT_SEEN)  # fitted with the others' light left out
         assert OVERLAP_SEEN_RANGE[0] <= disc.outline_seen <= OVERLAP_SEEN_RANGE[1], disc.outline_seen
     assert found[0].cluster is not None and found[0].cluster == found[1].cluster == found[2].cluster
     # The middle disc's own outline: only its top and bottom arcs, not the lenses shared with its neighbours.
     middle = found[1]
+    assert not middle.usable, "shares both sides: too little of its outline is its own"
     own = middle.outline_xy[middle.outline_reliable]
     assert np.all(np.abs(own[:, 0] - centres[1][0]) < 0.5 * 56.0)
 

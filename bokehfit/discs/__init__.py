@@ -53,6 +53,7 @@ __all__ = [
     "MAX_CLUSTER_CANDIDATES",
     "FULL_OUTLINE_SEEN",
     "MIN_OUTLINE_SEEN",
+    "MIN_FIT_SEEN",
     "USABLE_EVIDENCE",
 ]
 
@@ -72,9 +73,11 @@ MAX_CLUSTER_CANDIDATES = MAX_CANDIDATES // 20
 #: near a frame corner or a pixel of bloom do not make it partial).
 FULL_OUTLINE_SEEN = 0.98
 #: What a usable disc offers (:attr:`Disc.evidence`), best first.
-USABLE_EVIDENCE = ("plateau", "edge")
-#: Least share of its outline a disc must show to say something about the shape.
+USABLE_EVIDENCE = ("plateau", "edge", "partial")
+#: Least share of its outline a disc must show to say something about the shape ...
 MIN_OUTLINE_SEEN = 0.5
+#: ... and to be fitted (the rest of its crop, another light's, is left out of the fit).
+MIN_FIT_SEEN = 0.75
 #: Outline points closer than this (px) inside another disc's outline belong to the overlap.
 OVERLAP_MARGIN_PX = 1.5
 #: Smallest image searched, in pixels a side: a disc needs a surround to be told from the background.
@@ -117,10 +120,12 @@ class Disc:
 
     @property
     def usable(self) -> bool:
-        """The fit can use it: resolvable, whole (not cut by the frame or overlapping), and a clean plateau or
-        an outline of its own (``edge``: a saturated disc, fitted with its clipped pixels as lower bounds,
-        or a ring, fitted with the rim profile). Partial outlines are not fitted."""
-        return self.resolvable and self.evidence in USABLE_EVIDENCE and not (self.clipped or self.overlaps)
+        """The fit can use it: resolvable, not cut by the frame nor crossed by an occluder, and at least
+        MIN_FIT_SEEN of its outline its own: a clean plateau, an outline of its own (``edge``: a saturated
+        disc, fitted with its clipped pixels as lower bounds, a ring or a bright centre, fitted with the
+        rim profile), or a disc overlapping others (``partial``: their light is left out of its fit)."""
+        return (self.resolvable and self.evidence in USABLE_EVIDENCE
+                and not (self.clipped or self.occluded) and self.outline_seen >= MIN_FIT_SEEN)
 
     @property
     def shape_usable(self) -> bool:

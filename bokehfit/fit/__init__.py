@@ -2,10 +2,13 @@
 
 The steps (design.md §8, the simplest model the data supports):
 
-1. **Discs.** Only discs clean enough to show their shape are used: resolvable
-   (≥ 8 px) and neither saturated, cut by the frame nor overlapping another
-   (those are left out, not down-weighted: their outlines are not the
-   aperture's). At most ``FitOptions.max_discs``, the largest and clearest first.
+1. **Discs.** The discs that show their shape (:attr:`Disc.usable`): resolvable
+   (≥ 8 px), not cut by the frame nor crossed by an occluder, and most of their
+   outline their own. Saturated discs are fitted with their clipped pixels as
+   lower bounds; discs that overlap others with the others' light left out
+   (:mod:`bokehfit.fit.pixels`). At most ``FitOptions.max_discs``: discs on
+   their own first, then clean before saturated before partial, the largest and
+   clearest first.
 2. **Screen.** Each disc's outline is compared with every family's radial
    signature (:mod:`bokehfit.fit.signature`); the ``FitOptions.shortlist`` families with
    the lowest mean misfit, and always the circle, go on to the pixel fit.
@@ -42,7 +45,7 @@ import cv2
 import numpy as np
 
 from bokehfit.apertures import Aperture
-from bokehfit.discs import USABLE_EVIDENCE, Disc
+from bokehfit.discs import MIN_FIT_SEEN, USABLE_EVIDENCE, Disc
 from bokehfit.errors import InputError
 from bokehfit.fit.families import FAMILIES, Family, families_for
 from bokehfit.fit.pixels import FIT_BOUNDS, DiscCrop, PixelFit, crop_disc, fit_discs, render_disc_model
@@ -291,9 +294,11 @@ MIN_OUTLIER_RMS = 0.05
 
 
 def _order_for_fit(discs: list[Disc], max_discs: int) -> list[Disc]:
-    """The discs fitted: clean ones first, then edges; the largest and clearest first within each."""
+    """The discs fitted: those on their own before those beside or on other light (fitted with that
+    light left out); within each, clean ones first, then edges, then outlines seen in part; the
+    largest and clearest first."""
     usable = [d for d in discs if d.usable]
-    usable.sort(key=lambda d: (USABLE_EVIDENCE.index(d.evidence), -d.diameter_px * min(d.snr, 50.0)))
+    usable.sort(key=lambda d: (d.overlaps, USABLE_EVIDENCE.index(d.evidence), -d.diameter_px * min(d.snr, 50.0)))
     return usable[:max_discs]
 
 
@@ -488,9 +493,12 @@ def _rim_signal(crop: DiscCrop, fit: PixelFit) -> float | None:
     if crop.censored is not None or fit.diameter_px / crop.factor < RIM_MIN_DIAMETER_PX / 2:
         return None
     values = crop.values_of(fit)
-    model, background, plateau = render_disc_model(fit.aperture, values, crop.size, crop.data, crop.field_position)
+    model, background, plateau = render_disc_model(fit.aperture, values, crop.size, crop.data, crop.field_position,
+                                                   ignored=crop.ignored)
     rows, cols = np.indices((crop.size, crop.size))
     radius = np.hypot(cols - values["cx"], rows - values["cy"]).ravel() / (0.5 * values["diameter_px"])
+    if crop.ignored is not None:
+        radius[crop.ignored] = np.inf  # not the disc's light: in neither ring
     residual = crop.data - model
     inner, rim = residual[radius < 0.5], residual[(radius > 0.65) & (radius < 0.9)]
     contrast = plateau - background
@@ -573,20 +581,20 @@ def fit_aperture(
     if not chosen:
         flagged = {
             "cut by the frame": sum(d.clipped for d in discs),
-            "overlapping": sum(d.overlaps for d in discs),
+            "crossed by an occluder": sum(d.occluded for d in discs),
             "under 8 px": sum(not d.resolvable for d in discs),
-            "seen only in part": sum(d.evidence not in USABLE_EVIDENCE for d in discs),
+            "seen only in part": sum(d.outline_seen < MIN_FIT_SEEN for d in discs),
         }
         why = ", ".join(f"{n} {what}" for what, n in flagged.items() if n)
         found = f"{len(discs)} found: {why}" if discs else "none found"
         return FailedFit("no_discs", f"no disc is clean enough to fit ({found})", time_s=time.perf_counter() - start)
 
-    crops = [crop_disc(luminance, d, clipped) for d in chosen]
+    crops = [crop_disc(luminance, d, clipped, discs) for d in chosen]
     # Every family is screened straight and, where it has blades, rounded (design.md §3b): a
     # rounded 7-gon looks more like a 12-gon than a 7-gon to a straight-only screen.
     rounded_of = {f: f.rounded for f in families if f.rounded is not None}
     screen_families = (*families, *rounded_of.values())
-    screened = [screen(d.outline_xy, screen_families, _slit_aspect(d)) for d in chosen]
+    screened = [screen(d.outline_xy, screen_families, _slit_aspect(d), d.outline_reliable) for d in chosen]
     screens_of = [{s.family: s for s in disc_screens} for disc_screens in screened]
     mean_rms = {f: np.mean([found[f].rms for found in screens_of]) for f in screen_families}
     best_rms = {f: min(mean_rms[f], mean_rms[rounded_of[f]]) if f in rounded_of else mean_rms[f] for f in families}

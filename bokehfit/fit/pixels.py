@@ -30,6 +30,18 @@ renders of every disc, not one per parameter. Each disc's residuals are
 divided by its own noise level (from its single-disc fit), so a bright disc
 does not outvote the others.
 
+**Other light is not the disc's.** A disc that overlaps others, or was cut
+out of a larger bright region (``Disc.overlaps``), shares its crop with their
+light. The pixels that are not its own are left out of its fit
+(``DiscCrop.ignored``): inside its
+outline, those inside another disc's outline (the overlap, where the lights
+add up); outside it, beyond ``OWN_MARGIN_PX`` of the outline, those brighter
+than ``FOREIGN_LEVEL`` of the disc's contrast over its background (a
+neighbour, a bright region; the disc's own edge has fallen below that there).
+What is left is fitted as usual: the disc's own edge and plateau fix its
+shape. A disc on its own keeps its whole crop (the little light of a neighbour
+that reaches it is fitted as background, as it always was).
+
 Crops wider than ``MAX_FIT_SIDE`` px are reduced by an integer factor first
 (area averaging), which keeps the cost per disc bounded and loses nothing the
 shape needs. Uncertainties are from the Jacobian at the optimum:
@@ -67,6 +79,10 @@ __all__ = [
 
 #: Largest crop side fitted at full resolution; larger discs are reduced first.
 MAX_FIT_SIDE = 36
+#: A disc's own light reaches this far (px) beyond its 50 % outline (its blurred edge) ...
+OWN_MARGIN_PX = 3.0
+#: ... and beyond that, light brighter than this share of its contrast is another light's.
+FOREIGN_LEVEL = 0.25
 #: Most function evaluations per fit.
 MAX_EVALUATIONS = 200
 #: Relative change of the cost and of the parameters at which a fit stops (scipy's ftol and xtol):
@@ -100,6 +116,13 @@ class DiscCrop:
     corner: tuple[int, int]  #: full-resolution (left, top) of the crop
     field_position: tuple[float, float]  #: the disc's centre from the image centre, half-diagonals, y up
     turned: bool = False  #: the disc shows the aperture turned by 180° (:meth:`Aperture.near`) from the others
+    #: flattened: True where the light is not the disc's (the module's Notes); None if there is none.
+    ignored: np.ndarray | None = None
+
+    @property
+    def pixels(self) -> int:
+        """The pixels fitted: the crop's, less those ignored."""
+        return self.data.size - (0 if self.ignored is None else int(self.ignored.sum()))
 
     @property
     def start(self) -> dict[str, float]:
@@ -150,8 +173,10 @@ def field_position(center_xy: Sequence[float], shape: tuple[int, int]) -> tuple[
     return (x, y)
 
 
-def crop_disc(luminance: np.ndarray, disc: Disc, clipped: np.ndarray | None = None) -> DiscCrop:
-    """Square crop around the disc (reduced if wide), with the clipped pixels of ``clipped`` censored."""
+def crop_disc(luminance: np.ndarray, disc: Disc, clipped: np.ndarray | None = None,
+              others: Sequence[Disc] = ()) -> DiscCrop:
+    """Square crop around the disc (reduced if wide), with the clipped pixels of ``clipped`` censored
+    and the light that is not the disc's ignored (``others``: the photo's other discs; module Notes)."""
     reach = float(np.max(np.hypot(*(disc.outline_xy - disc.center_xy).T)))
     half = int(math.ceil(reach * 1.25 + 3))
     factor = max(1, int(math.ceil((2 * half + 1) / MAX_FIT_SIDE)))
@@ -177,8 +202,12 @@ def crop_disc(luminance: np.ndarray, disc: Disc, clipped: np.ndarray | None = No
         censored = mask.ravel() > 0.0
         if not censored.any():
             censored = None
+    ignored = _foreign(crop, disc, others, (left, top)) if disc.overlaps else None
     if factor > 1:
         crop = cv2.resize(crop, (side // factor, side // factor), interpolation=cv2.INTER_AREA)
+        if ignored is not None:  # a reduced pixel with any foreign light in it is not the disc's
+            ignored = cv2.resize(ignored.astype(np.float32), (side // factor, side // factor),
+                                 interpolation=cv2.INTER_AREA) > 0.0
     return DiscCrop(
         disc=disc,
         data=crop.ravel().astype(np.float64),
@@ -187,7 +216,28 @@ def crop_disc(luminance: np.ndarray, disc: Disc, clipped: np.ndarray | None = No
         factor=factor,
         corner=(left, top),
         field_position=field_position(disc.center_xy, luminance.shape),
+        ignored=None if ignored is None or not ignored.any() else ignored.ravel(),
     )
+
+
+def _foreign(crop: np.ndarray, disc: Disc, others: Sequence[Disc], corner: tuple[int, int]) -> np.ndarray | None:
+    """Pixels of a full-resolution crop whose light is not the disc's (the module's Notes), or None."""
+    side = crop.shape[0]
+    origin = np.array(corner, dtype=np.float64)
+    own = np.zeros(crop.shape, np.uint8)
+    cv2.fillPoly(own, [np.round(disc.outline_xy - origin).astype(np.int32)], 1)
+    margin = 2 * int(math.ceil(OWN_MARGIN_PX)) + 1
+    near = cv2.dilate(own, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (margin, margin))).astype(bool)
+    level = disc.background + FOREIGN_LEVEL * (disc.plateau - disc.background)
+    foreign = ~near & (crop > level)
+    low, high = origin - 1.0, origin + side
+    for other in others:
+        if other is disc or np.any(other.outline_xy.max(axis=0) < low) or np.any(other.outline_xy.min(axis=0) > high):
+            continue
+        theirs = np.zeros(crop.shape, np.uint8)
+        cv2.fillPoly(theirs, [np.round(other.outline_xy - origin).astype(np.int32)], 1)
+        foreign |= near & cv2.dilate(theirs, np.ones((3, 3), np.uint8)).astype(bool)
+    return foreign if foreign.any() else None
 
 
 @dataclass(frozen=True)
@@ -295,15 +345,18 @@ def render_disc_model(
     data: np.ndarray,
     field_position: Sequence[float] | None = None,
     censored: np.ndarray | None = None,
+    ignored: np.ndarray | None = None,
 ) -> tuple[np.ndarray, float, float]:
     """Model crop (flattened) with its levels for ``data``: (model, background, plateau).
 
-    The levels are solved for (least squares over the pixels not censored);
+    The levels are solved for (least squares over the pixels neither censored nor ignored);
     a ``disc`` that holds ``"plateau"`` (a saturated disc) fixes the plateau
     and only the background is solved for.
     """
     profile = disc_profile(aperture, disc, size, field_position).ravel().astype(np.float64)
-    seen = slice(None) if censored is None else ~censored
+    seen = slice(None)
+    if censored is not None or ignored is not None:
+        seen = ~(_or(censored, ignored))
     if "plateau" in disc:
         plateau = disc["plateau"]
         background = _background(profile[seen], data[seen], plateau)
@@ -313,11 +366,19 @@ def render_disc_model(
 
 
 def _residuals(model: np.ndarray, crop: DiscCrop) -> np.ndarray:
-    """model − data; where the source is clipped only a model below the recorded value is an error."""
+    """model − data; where the source is clipped only a model below the recorded value is an error;
+    where the light is not the disc's, none."""
     residual = model - crop.data
     if crop.censored is not None:
         residual[crop.censored] = np.minimum(residual[crop.censored], 0.0)
+    if crop.ignored is not None:
+        residual[crop.ignored] = 0.0
     return residual
+
+
+def _or(a: np.ndarray | None, b: np.ndarray | None) -> np.ndarray:
+    """``a | b`` of two optional masks (one of them given)."""
+    return b if a is None else a if b is None else a | b
 
 
 def _disc_vector(crop: DiscCrop) -> tuple[list[str], list[float], list[float], list[float]]:
@@ -413,7 +474,7 @@ def fit_discs(
         turned = aperture.near() if any(c.turned for c in crops) else aperture
         parts = [
             _residuals(render_disc_model(turned if c.turned else aperture, d, c.size, c.data, c.field_position,
-                                         c.censored)[0], c) / s
+                                         c.censored, c.ignored)[0], c) / s
             for c, d, s in zip(crops, discs, noise)
         ]
         return np.concatenate(parts)
@@ -444,7 +505,7 @@ def fit_discs(
     aperture = _wrapped(start, {name: float(v) for name, v in zip(free, result.x[:shared])})
     jacobian = result.jac.toarray() if hasattr(result.jac, "toarray") else result.jac
     # The levels solved for at every step count too: two per disc, one where the plateau is fitted.
-    n, k = len(result.fun), len(x0) + sum(1 if "plateau" in names else 2 for _, names in blocks)
+    n, k = sum(c.pixels for c in crops), len(x0) + sum(1 if "plateau" in names else 2 for _, names in blocks)
     total = float(np.sum(result.fun**2))
     sigma = np.full(len(x0), np.nan)
     try:
@@ -456,7 +517,7 @@ def fit_discs(
     for crop, values, (at, names), count, scale in zip(crops, discs, blocks, rows, noise):
         shown = aperture.near() if crop.turned else aperture
         model, background, plateau = render_disc_model(shown, values, crop.size, crop.data, crop.field_position,
-                                                       crop.censored)
+                                                       crop.censored, crop.ignored)
         rss = float(np.sum(_residuals(model, crop) ** 2))
         centre, diameter, blur = crop.to_full(values)
         in_full = {"cx": crop.factor, "cy": crop.factor, "diameter_px": crop.factor, "blur_px": crop.factor}
@@ -471,7 +532,7 @@ def fit_discs(
             background=float(background),
             blur_px=blur,
             rss=rss,
-            pixels=crop.data.size,
+            pixels=crop.pixels,
             uncertainty=uncertainty,
             evaluations=int(result.nfev),
             success=bool(result.success),

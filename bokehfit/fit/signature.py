@@ -7,7 +7,11 @@ An outline seen from its centroid is a radius function r(θ), sampled on
 unit-area outline gives its own r(θ) at angle 0; turning the shape by a shifts
 the function by a, so the best angle is the circular cross-correlation's peak
 (one FFT for all shifts, refined by a parabola through the peak) and the score
-is the RMS difference at that angle. It costs microseconds, ranks the families
+is the RMS difference at that angle. A disc that shows only part of its
+outline as its own (it overlaps another) is scored on those angles alone,
+with its scale free (its equal-area radius includes the part it does not
+show): each term of the weighted least squares over the shifts is again a
+circular correlation, so it costs a few more FFTs. It costs microseconds, ranks the families
 for the pixel fit, and gives the fit its starting angle.
 """
 
@@ -43,6 +47,28 @@ class Screen:
         return self.aperture.angle_deg
 
 
+def partial_signature(outline_xy: np.ndarray, reliable: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """r(θ) of an outline seen only in part, and the weights (1 where seen) on the SAMPLES angles.
+
+    Where part of the outline is not the disc's own (it runs along a neighbour), the centroid
+    and the equal-area radius are not the disc's either. The centre is then the circle fitted
+    to the points it shows (Kåsa's least squares), which a regular shape's sides keep near its
+    centre, and the scale is left to the comparison (:func:`_best_shift` with weights).
+    """
+    points = image_to_aperture(np.asarray(outline_xy, dtype=np.float64)[:, ::-1])
+    seen = np.asarray(reliable, dtype=bool)
+    x, y = points[seen].T
+    design = np.column_stack([x, y, np.ones_like(x)])
+    (a, b, _), *_ = np.linalg.lstsq(design, x * x + y * y, rcond=None)
+    cx, cy = 0.5 * a, 0.5 * b
+    angles = np.mod(np.arctan2(points[:, 1] - cy, points[:, 0] - cx), 2 * np.pi)
+    radii = np.hypot(points[:, 0] - cx, points[:, 1] - cy)
+    order = np.argsort(angles)
+    r = np.interp(_THETA, angles[order], radii[order], period=2 * np.pi)
+    weights = np.interp(_THETA, angles[order], seen[order].astype(np.float64), period=2 * np.pi) > 0.5
+    return r / max(float(np.median(radii[seen])), 1e-12), weights.astype(np.float64)
+
+
 def radial_signature(outline_xy: np.ndarray) -> np.ndarray:
     """r(θ) / r_eq of a closed outline (image (column, row) points) about its centroid, on the SAMPLES angles (y up)."""
     return _signature(image_to_aperture(np.asarray(outline_xy, dtype=np.float64)[:, ::-1]))
@@ -52,10 +78,8 @@ def _signature(points: np.ndarray) -> np.ndarray:
     """r(θ) / r_eq about the centroid of a closed polygon of (x, y) points in the aperture frame."""
     x, y = points.T
     x1, y1 = np.roll(x, -1), np.roll(y, -1)
-    cross = x * y1 - x1 * y
-    area = 0.5 * cross.sum()
-    cx = ((x + x1) * cross).sum() / (6.0 * area)
-    cy = ((y + y1) * cross).sum() / (6.0 * area)
+    area = 0.5 * (x * y1 - x1 * y).sum()
+    cx, cy = _centroid(x, y)
     angles = np.arctan2(y - cy, x - cx)
     radii = np.hypot(x - cx, y - cy)
     order = np.argsort(angles)
@@ -66,6 +90,13 @@ def _signature(points: np.ndarray) -> np.ndarray:
 def _model_signature(aperture: Aperture) -> np.ndarray:
     """r(θ) / r_eq of the unit-area aperture at angle 0 (:meth:`Aperture.outline_radius`)."""
     return aperture.outline_radius(_THETA) * np.sqrt(np.pi)
+
+
+def _centroid(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    x1, y1 = np.roll(x, -1), np.roll(y, -1)
+    cross = x * y1 - x1 * y
+    area = 0.5 * cross.sum()
+    return ((x + x1) * cross).sum() / (6.0 * area), ((y + y1) * cross).sum() / (6.0 * area)
 
 
 def outline_misfit(outline_xy: np.ndarray, aperture: Aperture, field_position=None) -> float:
@@ -83,8 +114,20 @@ def outline_misfit(outline_xy: np.ndarray, aperture: Aperture, field_position=No
     return _best_shift(observed, _signature(dense))[1]
 
 
-def _best_shift(observed: np.ndarray, model: np.ndarray) -> tuple[float, float]:
-    """Rotation (radians) of the model that best fits, and the RMS difference there."""
+def _best_shift(observed: np.ndarray, model: np.ndarray, weights: np.ndarray | None = None) -> tuple[float, float]:
+    """Rotation (radians) of the model that best fits, and the RMS difference there.
+
+    With ``weights`` (1 where the outline is seen, 0 elsewhere) only the seen angles count, and
+    the model's scale k is free: the cost over shifts s, Σw·o² − (Σw·o·mₛ)² / Σw·mₛ², is made of
+    circular correlations.
+    """
+    if weights is not None:
+        spectrum = np.conj(np.fft.rfft(model))
+        cross = np.fft.irfft(np.fft.rfft(weights * observed) * spectrum, SAMPLES)
+        power = np.fft.irfft(np.fft.rfft(weights) * np.conj(np.fft.rfft(model * model)), SAMPLES)
+        cost = np.sum(weights * observed**2) - cross**2 / np.maximum(power, 1e-12)
+        k = int(np.argmin(cost))
+        return k * 2 * np.pi / SAMPLES, float(np.sqrt(max(cost[k], 0.0) / max(weights.sum(), 1.0)))
     correlation = np.fft.irfft(np.fft.rfft(observed) * np.conj(np.fft.rfft(model)), SAMPLES)
     k = int(np.argmax(correlation))
     left, centre, right = correlation[k - 1], correlation[k], correlation[(k + 1) % SAMPLES]
@@ -95,14 +138,19 @@ def _best_shift(observed: np.ndarray, model: np.ndarray) -> tuple[float, float]:
     return shift, float(np.sqrt(np.mean(residual * residual)))
 
 
-def screen(outline_xy: np.ndarray, families: tuple[Family, ...], slit_aspect: float | None) -> list[Screen]:
+def screen(outline_xy: np.ndarray, families: tuple[Family, ...], slit_aspect: float | None,
+           reliable: np.ndarray | None = None) -> list[Screen]:
     """Every family's best angle and RMS misfit for one outline, best first.
 
     ``slit_aspect`` (the outline's, None for none) is given to the families
     that have an ``aspect`` parameter; a family whose aperture varies its
     ``roundness`` is tried at each of :data:`ROUNDNESS_GRID` and keeps the best.
+    ``reliable`` (per outline point) limits the score to the outline's own points.
     """
-    observed = radial_signature(outline_xy)
+    if reliable is None or np.all(reliable) or np.sum(reliable) < 8:
+        observed, weights = radial_signature(outline_xy), None
+    else:
+        observed, weights = partial_signature(outline_xy, reliable)
     results = []
     for family in families:
         aperture = family.at(aspect=slit_aspect) if slit_aspect is not None else family.aperture
@@ -111,7 +159,7 @@ def screen(outline_xy: np.ndarray, families: tuple[Family, ...], slit_aspect: fl
             tries = [aperture.replace(roundness=r) for r in ROUNDNESS_GRID]
         best = None
         for model in tries:
-            shift, rms = _best_shift(observed, _model_signature(model))
+            shift, rms = _best_shift(observed, _model_signature(model), weights)
             if best is None or rms < best[2]:
                 best = (model, shift, rms)
         model, shift, rms = best
