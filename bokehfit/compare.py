@@ -373,6 +373,10 @@ def _describe(aperture: dict) -> str:
     features = []
     if aperture.get("roundness"):
         features.append(f"roundness {aperture['roundness']:.2f} ± {_fmt(aperture.get('roundness_uncertainty'), 2)}")
+    if aperture.get("squeeze") not in (None, 1.0):
+        tall = "taller than wide" if aperture["squeeze"] > 1 else "wider than tall"
+        features.append(f"anamorphic squeeze {aperture['squeeze']:.3f} ± {_fmt(aperture.get('squeeze_uncertainty'), 3)} "
+                        f"(discs {tall})")
     if aperture.get("rim"):
         side = "bright rim" if aperture["rim"] > 0 else "bright centre"
         features.append(f"rim {aperture['rim']:+.2f} ± {_fmt(aperture.get('rim_uncertainty'), 2)} ({side})")

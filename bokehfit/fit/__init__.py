@@ -206,11 +206,14 @@ class ApertureFit:
         if aperture.vignetting is not None:
             vignetting = Parameter("vignetting", {"radius": aperture.vignetting.radius, "shift": aperture.vignetting.shift},
                                    {"radius": sigma.get("vignetting_radius"), "shift": sigma.get("vignetting_shift")})
+        squeeze = None
+        if "squeeze" in aperture.enabled_features or "squeeze" in tested:
+            squeeze = Parameter("squeeze", aperture.squeeze, sigma.get("squeeze"))
         chromatic = None
         if aperture.chromatic is not None:
             chromatic = Parameter("chromatic", {"red": aperture.chromatic.red, "blue": aperture.chromatic.blue},
                                   {"red": sigma.get("chromatic_red"), "blue": sigma.get("chromatic_blue")})
-        features = {"roundness": roundness, "rim": rim, "vignetting": vignetting, "chromatic": chromatic}
+        features = {"roundness": roundness, "squeeze": squeeze, "rim": rim, "vignetting": vignetting, "chromatic": chromatic}
         return {
             "angle_deg": Parameter("angle_deg", angle, self.angle_uncertainty_deg if angle is not None else None),
             "diameter_px": Parameter("diameter_px", self.diameter_px, self.diameter_uncertainty_px),
@@ -280,6 +283,13 @@ VIGNETTING_START_CUT = 0.85
 RIM_MIN_DIAMETER_PX = 20.0
 #: ... leave their rims brighter or darker than their centres under the flat model by this share of the contrast.
 RIM_SIGNAL = 0.04
+#: The squeeze (an anamorphic lens: design.md §3b) is tried where at least MIN_ELONGATED_DISCS discs
+#: are stretched along the frame's axes alike: their outlines' second moments put the long axis
+#: within SQUEEZE_AXIS_DEG of the frame's, the height over width (the squeeze) of their median at
+#: least SQUEEZE_SIGNAL from 1 in ratio, and every disc within SQUEEZE_AGREEMENT of it.
+SQUEEZE_AXIS_DEG = 10.0
+SQUEEZE_SIGNAL = 1.03
+SQUEEZE_AGREEMENT = 0.06
 #: Least |rim| reported: a smaller one changes a disc's profile by under 5 % (below what a photo's discs show).
 MIN_RIM = 0.05
 #: Most discs fitted jointly (the clearest first): the shared parameters are settled well before.
@@ -473,11 +483,14 @@ def _fit_start(aperture: Aperture) -> Aperture:
     return aperture
 
 
-def _add_feature(aperture: Aperture, feature: str, fits: list[PixelFit]) -> Aperture:
+def _add_feature(aperture: Aperture, feature: str, fits: list[PixelFit], discs: list[Disc]) -> Aperture:
     """``aperture`` with ``feature`` switched on at a start from which the fit can move.
 
-    The vignetting starts as a barrel that just cuts the disc farthest from the centre.
+    The vignetting starts as a barrel that just cuts the disc farthest from the centre; the
+    squeeze at the one the discs' outlines share.
     """
+    if feature == "squeeze":
+        return aperture.with_features("squeeze").replace(squeeze=_squeeze_signal(discs) or 1.0)
     if feature == "vignetting":
         farthest = max(math.hypot(*f.field_position) for f in fits)
         shift = VIGNETTING_START_SHIFT
@@ -507,12 +520,40 @@ def _rim_signal(crop: DiscCrop, fit: PixelFit) -> float | None:
     return float((rim.mean() - inner.mean()) / contrast)
 
 
+def _squeeze_signal(discs: list[Disc]) -> float | None:
+    """The squeeze the discs' outlines share (module constants), or None where they share none.
+
+    A squeezed aperture scales x by 1/√s and y by √s after its rotation, so every disc's height
+    over width, from its outline's second moments about the frame's axes, is s.
+    """
+    if len(discs) < MIN_ELONGATED_DISCS:
+        return None
+    squeezes = []
+    for disc in discs:
+        moments = cv2.moments(disc.outline_xy.astype(np.float32))
+        mu20, mu02, mu11 = moments["mu20"], moments["mu02"], moments["mu11"]
+        if mu20 <= 0 or mu02 <= 0:
+            return None
+        axis = 0.5 * math.degrees(math.atan2(2.0 * mu11, mu20 - mu02))  # the long axis's, from x
+        squeeze = math.sqrt(mu02 / mu20)
+        off_axis = min(abs(axis), abs(abs(axis) - 90.0))
+        if off_axis > SQUEEZE_AXIS_DEG and abs(math.log(squeeze)) > math.log(SQUEEZE_SIGNAL):
+            return None  # stretched askew: not the frame-aligned squeeze of an anamorphic lens
+        squeezes.append(squeeze)
+    logs = np.log(squeezes)
+    middle = float(np.median(logs))
+    if abs(middle) < math.log(SQUEEZE_SIGNAL) or np.max(np.abs(logs - middle)) > SQUEEZE_AGREEMENT:
+        return None
+    return math.exp(middle)
+
+
 def _feature_tests(fits: list[PixelFit], discs: list[Disc], screens: list[Screen], crops: list[DiscCrop]) -> tuple[str, ...]:
     """The §3b features worth testing on these discs: the rim where some disc is a ring (a bright rim)
     or has a bright centre, or the flat model leaves the discs' rims brighter or darker than their centres (RIM_SIGNAL of the
     contrast, median over the discs that show a profile); the vignetting where at least 3 discs were
     fitted, some lie far enough from the centre to be cut (VIGNETTING_MIN_FIELD), and those misfit
-    the shape more than the central ones do (or none is central)."""
+    the shape more than the central ones do (or none is central); the squeeze where the discs are
+    stretched alike along the frame's axes (:func:`_squeeze_signal`)."""
     signals = [v for v in (_rim_signal(c, f) for c, f in zip(crops, fits)) if v is not None]
     profiled = bool(signals) and abs(float(np.median(signals))) >= RIM_SIGNAL
     features = ["rim"] if profiled or any(d.ring or d.bright_centre for d in discs) else []
@@ -521,6 +562,8 @@ def _feature_tests(fits: list[PixelFit], discs: list[Disc], screens: list[Screen
     outer, inner = rms[field >= VIGNETTING_MIN_FIELD], rms[field < VIGNETTING_MIN_FIELD]
     if len(discs) >= 3 and len(outer) and (not len(inner) or np.median(outer) > VIGNETTING_MISFIT_RATIO * np.median(inner)):
         features.append("vignetting")
+    if _squeeze_signal(discs) is not None:
+        features.append("squeeze")
     return tuple(features)
 
 
@@ -661,21 +704,28 @@ def fit_aperture(
     aperture = _consensus_start(winner, [winner_fits[i] for i in joint_ids], [turned[i] for i in joint_ids])
     joint = fit_discs(joint_crops, winner, aperture, noise=noise, disc_starts=disc_starts)
     feature_tests: dict[str, float] = {}
-    for feature in _feature_tests([winner_fits[i] for i in joint_ids], [chosen[i] for i in joint_ids],
-                                  [winner_screens[i] for i in joint_ids], joint_crops):
-        trial = fit_discs(joint_crops, winner, _add_feature(joint.aperture, feature, joint.fits), noise=noise,
+    joint_discs = [chosen[i] for i in joint_ids]
+    tests = _feature_tests([winner_fits[i] for i in joint_ids], joint_discs, [winner_screens[i] for i in joint_ids],
+                           joint_crops)
+    for feature in tests:
+        trial = fit_discs(joint_crops, winner, _add_feature(joint.aperture, feature, joint.fits, joint_discs), noise=noise,
                           disc_starts=[crops[i].values_of(f) for i, f in zip(joint_ids, joint.fits)])
         feature_tests[feature] = joint.bic - trial.bic
         visible = feature != "rim" or abs(trial.aperture.rim) >= MIN_RIM
         if feature_tests[feature] >= FEATURE_DELTA_BIC and visible and not _at_bound(trial.aperture, feature):
             joint = trial
     # With a feature on, the shape is chosen again between the winner and the simplest model:
-    # a cat-eye cut makes round discs look like a rounded triangle until the cut is in the model.
+    # a cat-eye cut makes round discs look like a rounded triangle until the cut is in the model,
+    # and an anamorphic squeeze makes them look like a slit (whose own aspect takes the squeeze).
     added = [f for f in feature_tests if f in joint.aperture.enabled_features]
+    if "squeeze" in tests and "aspect" in winner.aperture.parameters and "squeeze" not in added:
+        added.append("squeeze")
     simplest = FAMILIES[0]
     if added and simplest in families and winner.base != simplest:
         start_values = {n: v for n, v in joint.aperture.values.items() if any(n.startswith(f) for f in added)}
         plain = simplest.aperture.with_features(*added).replace(**start_values)
+        if "squeeze" in added and "squeeze" not in start_values:
+            plain = _add_feature(plain, "squeeze", joint.fits, joint_discs)
         untouched = [dataclasses.replace(c, turned=False) for c in joint_crops]
         trial = fit_discs(untouched, simplest, plain, noise=noise,
                           disc_starts=[crops[i].values_of(f) for i, f in zip(joint_ids, joint.fits)])

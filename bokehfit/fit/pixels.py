@@ -95,7 +95,8 @@ BLUR_RANGE = (0.05, 6.0)
 #: The parameters of every disc, first in the fit's vector (crop units; the centre in crop pixel coordinates).
 DISC_NAMES = ("cx", "cy", "diameter_px", "blur_px")
 #: Fit bounds narrower than :attr:`ParameterSpec.bounds`, by parameter name.
-FIT_BOUNDS = {"aspect": (0.01, MAX_SLIT_ASPECT), "vignetting_radius": (1.0, 4.0), "vignetting_shift": (-4.0, 4.0)}
+FIT_BOUNDS = {"aspect": (0.01, MAX_SLIT_ASPECT), "vignetting_radius": (1.0, 4.0), "vignetting_shift": (-4.0, 4.0),
+              "squeeze": (0.25, 4.0)}
 #: Parameters searched within a factor of 2 of their start (scale factors, not offsets).
 RELATIVE_PARAMETERS = ("aspect", "squeeze")
 #: Sub-pixels a side for the rim profile in the fit (the edge blur hides finer detail).
