@@ -398,8 +398,7 @@ def disc_problems(disc: Disc) -> list[str]:
     """Why a disc is not usable, in words shared by ``discs`` and ``compare`` (empty when usable)."""
     if disc.usable:
         return []
-    problems = [word for word, flag in (("cut by the frame", disc.clipped), ("crossed by an occluder", disc.occluded))
-                if flag]
+    problems = ["cut by the frame"] if disc.clipped else []
     if not disc.resolvable:
         problems.append(f"under {RESOLVABLE_PX:g} px")
     if disc.outline_seen < MIN_FIT_SEEN:
@@ -416,7 +415,8 @@ def _used_as(disc: Disc, fitted) -> str:
     if disc.ring or disc.bright_centre:
         return f"outline and profile ({'a ring: bright rim' if disc.ring else 'bright centre'})"
     if disc.evidence == "partial" or disc.overlaps:
-        return f"its own part ({disc.outline_seen:.0%} of the outline; the other light left out)"
+        left_out = "the occluder" if disc.occluded else "the other light"
+        return f"its own part ({disc.outline_seen:.0%} of the outline; {left_out} left out)"
     return "outline"
 
 

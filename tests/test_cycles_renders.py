@@ -269,3 +269,19 @@ def test_overlapping_saturated_discs_are_fitted_from_their_own_parts():
     fit = fit_aperture(photo.luminance, overlapping, clipped=photo.clipped)
     assert fit.aperture.blades == render["blades"], fit.message
     assert _angle_error(fit.aperture.angle_deg, render["angle_deg"], 60.0) < FIT_ANGLE_TOL_DEG
+
+
+@pytest.mark.parametrize("name", ["ngon6_round03_angle15", "ngon6_round0_angle50_saturated"])
+def test_a_disc_crossed_by_a_bar_is_fitted_with_the_bar_left_out(name):
+    """The renders' in-focus bars cross a disc: fitted alone, that disc gives the blades and the angle."""
+    from bokehfit.fit import fit_aperture
+    from bokehfit.fit.pixels import crop_disc
+
+    render = _truth()["renders"][name]
+    photo = load_photo(DATA / render["files"][0]["file"])
+    crossed = [d for d in find_discs(photo.luminance, photo.clipped).discs if d.occluded and d.usable]
+    assert crossed, "the bar's disc is found, usable"
+    assert crop_disc(photo.luminance, crossed[0], photo.clipped).ignored is not None, "the bar's pixels are left out"
+    fit = fit_aperture(photo.luminance, crossed[:1], clipped=photo.clipped)
+    assert fit.aperture.blades == render["blades"], fit.message
+    assert _angle_error(fit.aperture.angle_deg, render["angle_deg"], 60.0) < FIT_ANGLE_TOL_DEG

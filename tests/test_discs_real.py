@@ -144,7 +144,7 @@ def test_disc_crossed_by_a_branch_is_kept_with_the_crossing_unseen():
     disc = near[0]
     assert_measured(disc, centre, 90)
     assert disc.occluded and disc.evidence == "partial" and 0.8 < disc.outline_seen < FULL_OUTLINE_SEEN
-    assert disc.shape_usable and not disc.usable
+    assert disc.shape_usable and disc.usable  # fitted with the branch's pixels left out
     # The unseen points are where the branch crosses the outline, nowhere else.
     unseen = disc.outline_xy[~disc.outline_reliable]
     to_line = np.abs((unseen[:, 1] - 30) * 200 - (unseen[:, 0] - 20) * 160) / math.hypot(200, 160)

@@ -120,12 +120,13 @@ class Disc:
 
     @property
     def usable(self) -> bool:
-        """The fit can use it: resolvable, not cut by the frame nor crossed by an occluder, and at least
-        MIN_FIT_SEEN of its outline its own: a clean plateau, an outline of its own (``edge``: a saturated
-        disc, fitted with its clipped pixels as lower bounds, a ring or a bright centre, fitted with the
-        rim profile), or a disc overlapping others (``partial``: their light is left out of its fit)."""
-        return (self.resolvable and self.evidence in USABLE_EVIDENCE
-                and not (self.clipped or self.occluded) and self.outline_seen >= MIN_FIT_SEEN)
+        """The fit can use it: resolvable, not cut by the frame, and at least MIN_FIT_SEEN of its outline
+        its own: a clean plateau, an outline of its own (``edge``: a saturated disc, fitted with its clipped
+        pixels as lower bounds, a ring or a bright centre, fitted with the rim profile), or one seen in part
+        (``partial``: overlapping others, whose light is left out of its fit, or crossed by an occluder,
+        whose pixels are)."""
+        return (self.resolvable and self.evidence in USABLE_EVIDENCE and not self.clipped
+                and self.outline_seen >= MIN_FIT_SEEN)
 
     @property
     def shape_usable(self) -> bool:

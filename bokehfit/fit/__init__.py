@@ -3,10 +3,10 @@
 The steps (design.md §8, the simplest model the data supports):
 
 1. **Discs.** The discs that show their shape (:attr:`Disc.usable`): resolvable
-   (≥ 8 px), not cut by the frame nor crossed by an occluder, and most of their
-   outline their own. Saturated discs are fitted with their clipped pixels as
-   lower bounds; discs that overlap others with the others' light left out
-   (:mod:`bokehfit.fit.pixels`). At most ``FitOptions.max_discs``: discs on
+   (≥ 8 px), not cut by the frame, and most of their outline their own.
+   Saturated discs are fitted with their clipped pixels as lower bounds; discs
+   that overlap others with the others' light left out, discs crossed by an
+   occluder with its pixels left out (:mod:`bokehfit.fit.pixels`). At most ``FitOptions.max_discs``: discs on
    their own first, then clean before saturated before partial, the largest and
    clearest first.
 2. **Screen.** Each disc's outline is compared with every family's radial
@@ -624,7 +624,6 @@ def fit_aperture(
     if not chosen:
         flagged = {
             "cut by the frame": sum(d.clipped for d in discs),
-            "crossed by an occluder": sum(d.occluded for d in discs),
             "under 8 px": sum(not d.resolvable for d in discs),
             "seen only in part": sum(d.outline_seen < MIN_FIT_SEEN for d in discs),
         }

@@ -38,7 +38,10 @@ outline, those inside another disc's outline (the overlap, where the lights
 add up); outside it, beyond ``OWN_MARGIN_PX`` of the outline, those brighter
 than ``FOREIGN_LEVEL`` of the disc's contrast over its background (a
 neighbour, a bright region; the disc's own edge has fallen below that there).
-What is left is fitted as usual: the disc's own edge and plateau fix its
+A disc crossed by an occluder (``Disc.occluded``: a branch, a grass blade in
+focus in front of it) also loses the pixels the occluder darkens: inside its
+outline those below half its contrast, outside those below its background by
+that much. What is left is fitted as usual: the disc's own edge and plateau fix its
 shape. A disc on its own keeps its whole crop (the little light of a neighbour
 that reaches it is fitted as background, as it always was).
 
@@ -83,6 +86,9 @@ MAX_FIT_SIDE = 36
 OWN_MARGIN_PX = 3.0
 #: ... and beyond that, light brighter than this share of its contrast is another light's.
 FOREIGN_LEVEL = 0.25
+#: An occluder's pixels: inside the outline below this share of the contrast, outside below the
+#: background by this share of it.
+OCCLUDER_LEVEL = 0.5
 #: Most function evaluations per fit.
 MAX_EVALUATIONS = 200
 #: Relative change of the cost and of the parameters at which a fit stops (scipy's ftol and xtol):
@@ -203,7 +209,7 @@ def crop_disc(luminance: np.ndarray, disc: Disc, clipped: np.ndarray | None = No
         censored = mask.ravel() > 0.0
         if not censored.any():
             censored = None
-    ignored = _foreign(crop, disc, others, (left, top)) if disc.overlaps else None
+    ignored = _foreign(crop, disc, others, (left, top)) if disc.overlaps or disc.occluded else None
     if factor > 1:
         crop = cv2.resize(crop, (side // factor, side // factor), interpolation=cv2.INTER_AREA)
         if ignored is not None:  # a reduced pixel with any foreign light in it is not the disc's
@@ -229,8 +235,12 @@ def _foreign(crop: np.ndarray, disc: Disc, others: Sequence[Disc], corner: tuple
     cv2.fillPoly(own, [np.round(disc.outline_xy - origin).astype(np.int32)], 1)
     margin = 2 * int(math.ceil(OWN_MARGIN_PX)) + 1
     near = cv2.dilate(own, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (margin, margin))).astype(bool)
-    level = disc.background + FOREIGN_LEVEL * (disc.plateau - disc.background)
-    foreign = ~near & (crop > level)
+    contrast = disc.plateau - disc.background
+    foreign = ~near & (crop > disc.background + FOREIGN_LEVEL * contrast)
+    if disc.occluded:  # what the occluder darkens, inside the disc and across its surround
+        inside = own.astype(bool)
+        foreign |= inside & (crop < disc.background + OCCLUDER_LEVEL * contrast)
+        foreign |= ~near & (crop < disc.background - OCCLUDER_LEVEL * contrast)
     low, high = origin - 1.0, origin + side
     for other in others:
         if other is disc or np.any(other.outline_xy.max(axis=0) < low) or np.any(other.outline_xy.min(axis=0) > high):
