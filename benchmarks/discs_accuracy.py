@@ -113,7 +113,8 @@ def shelf_layout(shapes, diameters, seed):
             x, y, row_height = 0, y + row_height, 0
         row_height = max(row_height, cell)
         centre = (x + cell / 2 + rng.uniform(-0.5, 0.5), y + cell / 2 + rng.uniform(-0.5, 0.5))
-        truth.append(SyntheticDisc(centre, float(diameter), angle_deg=angle, brightness=brightness, **kwargs))
+        aperture = make_aperture(angle_deg=angle, **kwargs)
+        truth.append(SyntheticDisc(centre, float(diameter), aperture, brightness=brightness))
         x += cell
     return truth, width, y + row_height
 
@@ -199,8 +200,9 @@ def synthetic(shapes, diameters, replicates):
                 used = set()
                 for t, f in pairs:
                     record = dict(
-                        condition=condition, replicate=replicate, shape=t.shape, diameter_px=t.diameter_px,
-                        angle_deg=round(t.angle_deg, 3), brightness=round(t.brightness, 4), found=f is not None,
+                        condition=condition, replicate=replicate, shape=t.aperture.shape, diameter_px=t.diameter_px,
+                        angle_deg=round(t.aperture.angle_deg, 3), brightness=round(t.brightness, 4),
+                        found=f is not None,
                     )
                     if f is not None:
                         used.add(id(f))
@@ -288,7 +290,8 @@ def timing_scene(seed=11):
         if any(math.dist(centre, c) < 1.6 * (reach + r) + 8 for c, r in placed):
             continue
         placed.append((centre, reach))
-        truth.append(SyntheticDisc(centre, diameter, angle_deg=angle, brightness=float(rng.uniform(*BRIGHTNESS)), **kwargs))
+        aperture = make_aperture(angle_deg=angle, **kwargs)
+        truth.append(SyntheticDisc(centre, diameter, aperture, brightness=float(rng.uniform(*BRIGHTNESS))))
     return truth, width, height
 
 

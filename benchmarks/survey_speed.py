@@ -34,6 +34,7 @@ import numpy as np
 from PIL import Image
 
 import bokehfit
+from bokehfit.apertures import make_aperture
 from bokehfit.outputs import check_output_path, write_json
 from bokehfit.synthetic import SyntheticDisc, encode_srgb8, render_discs
 
@@ -54,7 +55,8 @@ def make_library(folder: Path, count: int) -> list[Path]:
         fnumber, shape = (2.0, "circle") if i % 2 == 0 else (4.0, "hexagon")
         diameter = FOCAL_LENGTH_MM**2 / (fnumber * (FOCUS_DISTANCE_MM - FOCAL_LENGTH_MM)) * WIDTH_PX / SENSOR_WIDTH_MM
         centres = [(64 + 128 * c + rng.uniform(-4, 4), 96 + 192 * r + rng.uniform(-4, 4)) for r in range(2) for c in range(4)]
-        linear = render_discs(WIDTH_PX, HEIGHT_PX, [SyntheticDisc(xy, diameter, shape, 15.0) for xy in centres],
+        aperture = make_aperture(shape, 15.0)
+        linear = render_discs(WIDTH_PX, HEIGHT_PX, [SyntheticDisc(xy, diameter, aperture) for xy in centres],
                               background=0.03, noise_sigma=0.002, seed=i)
         exif = Image.Exif()
         exif[0x0110] = "Bench Cam"

@@ -14,28 +14,52 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bokehfit.apertures import image_to_aperture, make_aperture
+from bokehfit.apertures import Aperture, image_to_aperture, make_aperture
 from bokehfit.kernels.exact import coverage
 
 __all__ = ["SyntheticDisc", "render_discs", "encode_srgb8"]
 
+#: The default aperture of a :class:`SyntheticDisc`: the plain circle (an
+#: :class:`~bokehfit.apertures.Aperture` is frozen, so one instance is shared).
+CIRCLE = make_aperture("circle", 0.0)
+
 
 @dataclass(frozen=True)
 class SyntheticDisc:
-    """One disc of a synthetic photo: where, how big, which aperture, how bright."""
+    """One disc of a synthetic photo: where, how big, which aperture, how bright.
+
+    Parameters
+    ----------
+    center_xy : tuple of float
+        (column, row) of the centre, pixel-centre coordinates.
+    diameter_px : float
+        Equal-area diameter, pixels.
+    aperture : Aperture
+        The aperture drawn (:func:`~bokehfit.apertures.make_aperture`); the
+        plain circle by default. The exact coverage of its outline is drawn,
+        so rounded blades and squeeze show; rim, chromatic and vignetting
+        (no field position is given) do not.
+    side : {"far", "near"}
+        Which side of focus: ``near`` shows the aperture turned by 180°
+        (:meth:`Aperture.near <bokehfit.apertures.Aperture.near>`).
+    brightness : float
+        Plateau above the background, linear (1.0 = white).
+
+    Examples
+    --------
+    >>> SyntheticDisc((60.3, 40.7), 30.0, make_aperture("hexagon", 10.0), brightness=0.6).aperture.describe()
+    'hexagon 10°'
+    """
 
     center_xy: tuple[float, float]  #: (column, row), pixel-centre coordinates
     diameter_px: float  #: equal-area diameter
-    shape: str = "circle"
-    angle_deg: float = 0.0
-    blades: int | None = None
-    aspect: float | None = None
+    aperture: Aperture = CIRCLE
     side: str = "far"
     brightness: float = 0.8  #: plateau above the background, linear (1.0 = white)
 
 
 def _stamp(image: np.ndarray, disc: SyntheticDisc) -> None:
-    aperture = make_aperture(disc.shape, disc.angle_deg, blades=disc.blades, aspect=disc.aspect)
+    aperture = disc.aperture
     scale = disc.diameter_px * math.sqrt(math.pi) / 2.0
     half = math.ceil(aperture.extent() * scale) + 2
     col0, row0 = round(disc.center_xy[0]), round(disc.center_xy[1])

@@ -22,6 +22,7 @@ import cv2
 import numpy as np
 from PIL import Image
 
+from bokehfit.apertures import make_aperture
 from bokehfit.optics import coc_mm
 from bokehfit.synthetic import SyntheticDisc, encode_srgb8, render_discs
 
@@ -30,7 +31,7 @@ SENSOR_WIDTH_MM = 36.0
 FOCAL_LENGTH_MM = 85.0
 FSTOP = 2.0
 FOCUS_DISTANCE_M = 3.0
-SHAPE, ANGLE_DEG = "hexagon", 15.0
+APERTURE = make_aperture("hexagon", 15.0)
 OUT = Path(__file__).with_name("hexagon_85mm_f2.jpg")
 
 
@@ -50,13 +51,13 @@ def main() -> None:
                 continue
             centre = (120 + col * 170 + rng.uniform(-25, 25), 140 + row * 190 + rng.uniform(-25, 25))
             distance = 12.0 if rng.random() < 0.2 else math.inf
-            discs.append(SyntheticDisc(centre, far if math.isinf(distance) else mid, SHAPE, ANGLE_DEG,
+            discs.append(SyntheticDisc(centre, far if math.isinf(distance) else mid, APERTURE,
                                        brightness=float(rng.uniform(0.25, 0.7))))
-    discs.append(SyntheticDisc((700.0, 560.0), far, SHAPE, ANGLE_DEG, brightness=0.6))  # an overlapping pair
-    discs.append(SyntheticDisc((735.0, 585.0), far, SHAPE, ANGLE_DEG, brightness=0.45))
-    discs.append(SyntheticDisc((1585.0, 300.0), far, SHAPE, ANGLE_DEG, brightness=0.5))  # cut by the frame
-    discs.append(SyntheticDisc((300.0, 980.0), far, SHAPE, ANGLE_DEG, brightness=2.5))  # saturated
-    discs.append(SyntheticDisc((1300.0, 980.0), mid, SHAPE, ANGLE_DEG, brightness=2.0))
+    discs.append(SyntheticDisc((700.0, 560.0), far, APERTURE, brightness=0.6))  # an overlapping pair
+    discs.append(SyntheticDisc((735.0, 585.0), far, APERTURE, brightness=0.45))
+    discs.append(SyntheticDisc((1585.0, 300.0), far, APERTURE, brightness=0.5))  # cut by the frame
+    discs.append(SyntheticDisc((300.0, 980.0), far, APERTURE, brightness=2.5))  # saturated
+    discs.append(SyntheticDisc((1300.0, 980.0), mid, APERTURE, brightness=2.0))
     # A dim, smoothly varying night background.
     texture = cv2.GaussianBlur(rng.normal(0.0, 1.0, (HEIGHT, WIDTH)).astype(np.float32), (0, 0), 60)
     background = 0.015 + 0.01 * texture / np.abs(texture).max() + np.linspace(0.0, 0.02, HEIGHT, dtype=np.float32)[:, None]

@@ -28,6 +28,7 @@ import pytest
 from photo_factory import file_state
 
 import bokehfit
+from bokehfit.apertures import make_aperture
 from bokehfit.synthetic import SyntheticDisc, encode_srgb8, render_discs
 
 PHOTO = Path(__file__).resolve().parents[1] / "examples" / "hexagon_85mm_f2.jpg"
@@ -321,8 +322,9 @@ def test_flat_image_exits_1_on_one_line(tmp_path):
 def test_saturated_discs_are_used_by_their_outlines(tmp_path):
     """Clipped plateaus do not hide the shape: both discs are used, their clipped pixels as lower bounds,
     and two discs are too few for a sure answer."""
-    path = write_jpeg(tmp_path / "sat.jpg", [SyntheticDisc((60, 60), 50, "hexagon", 10, brightness=2.5),
-                                             SyntheticDisc((150, 60), 40, "hexagon", 10, brightness=3.0)])
+    hexagon = make_aperture("hexagon", 10)
+    path = write_jpeg(tmp_path / "sat.jpg", [SyntheticDisc((60, 60), 50, hexagon, brightness=2.5),
+                                             SyntheticDisc((150, 60), 40, hexagon, brightness=3.0)])
     done, _ = bokehfit_cli("compare", path, "--no-html", "--json", tmp_path / "out.json", cwd=tmp_path)
     document = json.loads((tmp_path / "out.json").read_text())
     assert document["status"] == "unsure", document["reason"]

@@ -11,13 +11,14 @@ import numpy as np
 import pytest
 from photo_factory import file_state
 
+from bokehfit.apertures import make_aperture
 from bokehfit.synthetic import SyntheticDisc, encode_srgb8, render_discs
 
 TRUTH = [
-    SyntheticDisc((80.3, 90.6), 60, "hexagon", angle_deg=12),
-    SyntheticDisc((230.8, 80.2), 40, "circle"),
-    SyntheticDisc((330.1, 170.4), 30, "star", angle_deg=40),
-    SyntheticDisc((120.5, 200.5), 50, "pentagon", brightness=2.5),  # saturated in the JPEG
+    SyntheticDisc((80.3, 90.6), 60, make_aperture("hexagon", 12)),
+    SyntheticDisc((230.8, 80.2), 40, make_aperture("circle")),
+    SyntheticDisc((330.1, 170.4), 30, make_aperture("star", 40)),
+    SyntheticDisc((120.5, 200.5), 50, make_aperture("pentagon"), brightness=2.5),  # saturated in the JPEG
 ]
 
 

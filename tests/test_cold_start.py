@@ -18,6 +18,7 @@ import cv2
 import numpy as np
 import pytest
 
+from bokehfit.apertures import make_aperture
 from bokehfit.io.colour import KNOWN_SPACES, colour_science, luminance_weights, srgb_display_lut, srgb_encode
 from bokehfit.synthetic import SyntheticDisc, encode_srgb8, render_discs
 
@@ -46,7 +47,8 @@ def test_importing_compare_imports_nothing_heavy():
 
 
 def test_compare_on_usual_discs_starts_no_gpu_and_no_colour_science(tmp_path):
-    discs = [SyntheticDisc((70.0 + 110.0 * i, 90.0), 48.0, "hexagon", angle_deg=15.0, brightness=0.7) for i in range(3)]
+    hexagon = make_aperture("hexagon", 15.0)
+    discs = [SyntheticDisc((70.0 + 110.0 * i, 90.0), 48.0, hexagon, brightness=0.7) for i in range(3)]
     linear = render_discs(400, 180, discs, background=0.03, noise_sigma=0.002, seed=3)
     tint = np.array([1.0, 0.8, 0.55])  # a warm light: an RGB photo, not grey
     photo = tmp_path / "warm.jpg"

@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 import pytest
 
-from bokehfit.apertures import SHAPES
+from bokehfit.apertures import SHAPES, make_aperture
 from bokehfit.discs import MIN_FIT_SEEN, find_discs
 from bokehfit.errors import InputError
 from bokehfit.synthetic import SyntheticDisc, encode_srgb8, render_discs
@@ -49,9 +49,8 @@ def layout(diameters, shapes, *, seed=0, spacing_factor=1.5, width=None):
     for i, (diameter, shape) in enumerate(specs):
         row, col = divmod(i, columns)
         centre = ((col + 0.5) * cell + rng.uniform(-0.5, 0.5), (row + 0.5) * cell + rng.uniform(-0.5, 0.5))
-        discs.append(
-            SyntheticDisc(centre, diameter, angle_deg=rng.uniform(0, 360), brightness=rng.uniform(0.3, 0.9), **shape)
-        )
+        angle, brightness = rng.uniform(0, 360), rng.uniform(0.3, 0.9)
+        discs.append(SyntheticDisc(centre, diameter, make_aperture(angle_deg=angle, **shape), brightness=brightness))
     return discs, columns * cell, rows * cell
 
 
@@ -91,12 +90,13 @@ def slit_width_px(disc):
 
 def assert_accurate(matched, tol_rel, tol_px, centre_tol):
     for t, f in matched:
-        if t.shape == "slit" and slit_width_px(t) < SLIT_MIN_WIDTH_PX:
+        shape = t.aperture.shape
+        if shape == "slit" and slit_width_px(t) < SLIT_MIN_WIDTH_PX:
             continue
         error = abs(f.diameter_px - t.diameter_px)
-        assert error <= max(tol_rel * t.diameter_px, tol_px), f"{t.shape} {t.diameter_px} px: diameter {f.diameter_px:.2f}"
+        assert error <= max(tol_rel * t.diameter_px, tol_px), f"{shape} {t.diameter_px} px: diameter {f.diameter_px:.2f}"
         offset = math.hypot(f.center_xy[0] - t.center_xy[0], f.center_xy[1] - t.center_xy[1])
-        assert offset <= centre_tol, f"{t.shape} {t.diameter_px} px: centre off by {offset:.2f} px"
+        assert offset <= centre_tol, f"{shape} {t.diameter_px} px: centre off by {offset:.2f} px"
 
 
 @pytest.mark.parametrize("case", SHAPE_CASES, ids=[c["shape"] for c in SHAPE_CASES])
@@ -109,7 +109,7 @@ def test_every_shape_and_size_is_found_and_measured(case):
     assert_accurate(matched, DIAMETER_TOL_REL, DIAMETER_TOL_PX, CENTRE_TOL_PX)
     for t, f in matched:
         assert f.resolvable == (f.diameter_px >= 8.0)
-        assert not (f.saturated or f.clipped or f.overlaps), f"{t.shape} {t.diameter_px}: flags"
+        assert not (f.saturated or f.clipped or f.overlaps), f"{t.aperture.shape} {t.diameter_px}: flags"
 
 
 def jpeg_round_trip(linear, quality):
@@ -137,8 +137,8 @@ def test_jpeg_compressed_discs(quality):
 
 def test_saturated_discs_are_found_and_flagged():
     truth = [
-        SyntheticDisc((60.3, 60.7), 40, "hexagon", brightness=3.0),
-        SyntheticDisc((160.2, 60.1), 40, "hexagon", brightness=0.5),
+        SyntheticDisc((60.3, 60.7), 40, make_aperture("hexagon"), brightness=3.0),
+        SyntheticDisc((160.2, 60.1), 40, make_aperture("hexagon"), brightness=0.5),
     ]
     image = render_discs(220, 120, truth)
     search = find_discs(image, image >= 1.0)
@@ -149,7 +149,8 @@ def test_saturated_discs_are_found_and_flagged():
 
 
 def test_disc_clipped_by_frame_is_flagged():
-    truth = [SyntheticDisc((8.0, 70.0), 50, "circle"), SyntheticDisc((120.0, 70.0), 50, "circle")]
+    circle = make_aperture("circle")
+    truth = [SyntheticDisc((8.0, 70.0), 50, circle), SyntheticDisc((120.0, 70.0), 50, circle)]
     search = find_discs(render_discs(200, 140, truth, noise_sigma=0.002))
     pairs = dict((t.center_xy[0], f) for t, f in match(search.discs, truth))
     assert pairs[8.0] is not None and pairs[8.0].clipped and not pairs[8.0].usable
@@ -157,7 +158,8 @@ def test_disc_clipped_by_frame_is_flagged():
 
 
 def test_overlapping_discs_are_flagged():
-    truth = [SyntheticDisc((80.0, 80.0), 60, "circle"), SyntheticDisc((125.0, 82.0), 60, "circle", brightness=0.6)]
+    circle = make_aperture("circle")
+    truth = [SyntheticDisc((80.0, 80.0), 60, circle), SyntheticDisc((125.0, 82.0), 60, circle, brightness=0.6)]
     search = find_discs(render_discs(220, 170, truth, noise_sigma=0.002))
     assert search.discs and all(d.overlaps for d in search.discs)
     # usable (fitted with the other's light left out) only with enough of the outline its own
@@ -165,7 +167,7 @@ def test_overlapping_discs_are_flagged():
 
 
 def test_star_is_not_taken_for_overlapping_discs():
-    search = find_discs(render_discs(160, 160, [SyntheticDisc((80.2, 79.6), 90, "star", angle_deg=7)]))
+    search = find_discs(render_discs(160, 160, [SyntheticDisc((80.2, 79.6), 90, make_aperture("star", 7))]))
     assert len(search) == 1 and not search.discs[0].overlaps
 
 
@@ -259,9 +261,9 @@ def test_discs_survive_a_raw_round_trip(tmp_path):
     from bokehfit.io import load_photo
 
     truth = [
-        SyntheticDisc((70.4, 66.2), 48, "hexagon", angle_deg=10, brightness=0.5),
-        SyntheticDisc((190.7, 80.3), 36, "circle", brightness=0.4),
-        SyntheticDisc((130.2, 170.9), 56, "star", angle_deg=30, brightness=0.45),
+        SyntheticDisc((70.4, 66.2), 48, make_aperture("hexagon", 10), brightness=0.5),
+        SyntheticDisc((190.7, 80.3), 36, make_aperture("circle"), brightness=0.4),
+        SyntheticDisc((130.2, 170.9), 56, make_aperture("star", 30), brightness=0.45),
     ]
     linear = render_discs(260, 240, truth, background=0.05, noise_sigma=0.002, seed=9)
     black, white = 256, 4095
@@ -283,20 +285,21 @@ def strip_scene():
     """Discs of 5 to 150 px (one pair overlapping), a diagonal streak and a large faint disc on a
     gradient with noise: blobs of every band that cross the borders of strips a few rows tall."""
     truth = [
-        SyntheticDisc((60.4, 50.2), 6, "circle"),
-        SyntheticDisc((150.7, 95.3), 9, "hexagon", brightness=0.4),
-        SyntheticDisc((260.2, 140.6), 22, "pentagon", angle_deg=12),
-        SyntheticDisc((120.5, 230.1), 60, "circle", brightness=0.5),
-        SyntheticDisc((160.2, 236.4), 60, "circle", brightness=0.7),
-        SyntheticDisc((330.3, 300.8), 150, "hexagon", brightness=0.08),
-        SyntheticDisc((70.1, 380.9), 35, "star", angle_deg=40),
+        SyntheticDisc((60.4, 50.2), 6, make_aperture("circle")),
+        SyntheticDisc((150.7, 95.3), 9, make_aperture("hexagon"), brightness=0.4),
+        SyntheticDisc((260.2, 140.6), 22, make_aperture("pentagon", 12)),
+        SyntheticDisc((120.5, 230.1), 60, make_aperture("circle"), brightness=0.5),
+        SyntheticDisc((160.2, 236.4), 60, make_aperture("circle"), brightness=0.7),
+        SyntheticDisc((330.3, 300.8), 150, make_aperture("hexagon"), brightness=0.08),
+        SyntheticDisc((70.1, 380.9), 35, make_aperture("star", 40)),
     ]
     image = render_discs(420, 460, truth, background=gradient(420, 460, 0.02, 0.05), noise_sigma=0.003, seed=4)
     rows, cols = np.indices(image.shape)
     image[np.abs(rows - 1.05 * cols - 20) < 1.2] += 0.3  # a thin streak across the frame
     # A small disc just below row 152 (a border of 76-row strips) with a one-pixel thread off its
     # edge at 45°, up across the border: joined to the disc only through diagonal neighbours.
-    image = np.maximum(image, render_discs(420, 460, [SyntheticDisc((200.3, 160.2), 8, "circle", brightness=0.8)]))
+    small = SyntheticDisc((200.3, 160.2), 8, make_aperture("circle"), brightness=0.8)
+    image = np.maximum(image, render_discs(420, 460, [small]))
     for k in range(-2, 30):
         image[156 - k, 196 - k] += 0.2
     return image

@@ -49,7 +49,7 @@ JPEG_QUALITY = 80
 JPEG_MIN_CORRECT = 8
 SLIT_ASPECT = 0.3
 
-# (family name as the fitter reports it, SyntheticDisc shape, blades, aspect, angle)
+# (family name as the fitter reports it, make_aperture shape, blades, aspect, angle)
 FAMILY_CASES = [
     ("circle", "circle", None, None, 0.0),
     ("square", "square", None, None, 20.0),
@@ -75,7 +75,7 @@ def row_of_discs(shape, angle_deg, diameters, *, blades=None, aspect=None, side=
     for d, r in zip(diameters, reach):
         x += r
         centre = (x + rng.uniform(-0.5, 0.5), height / 2 + rng.uniform(-0.5, 0.5))  # sub-pixel centres
-        discs.append(SyntheticDisc(centre, d, shape, angle_deg, blades, aspect, side, brightness=0.6))
+        discs.append(SyntheticDisc(centre, d, aperture, side, brightness=0.6))
         x += 1.3 * r + gap
     return discs, int(x + gap), height
 
@@ -232,23 +232,24 @@ def test_twelve_blades_chosen_over_circle_when_the_discs_show_them():
 # No usable disc: a falsy result that says why
 # --------------------------------------------------------------------------------------
 
-SATURATED = [SyntheticDisc((60, 60), 50, "hexagon", 10, brightness=2.5), SyntheticDisc((160, 60), 40, "hexagon", 10, brightness=3.0)]
-CLIPPED = [SyntheticDisc((5, 60), 50, "hexagon", 10), SyntheticDisc((215, 60), 40, "hexagon", 10)]
+HEXAGON = make_aperture("hexagon", 10)
+SATURATED = [SyntheticDisc((60, 60), 50, HEXAGON, brightness=2.5), SyntheticDisc((160, 60), 40, HEXAGON, brightness=3.0)]
+CLIPPED = [SyntheticDisc((5, 60), 50, HEXAGON), SyntheticDisc((215, 60), 40, HEXAGON)]
 #: A pair that overlaps a little (each shows 86 % of its outline as its own: fitted) ...
 OVERLAPPING = [
-    SyntheticDisc((60, 60), 50, "hexagon", 10, brightness=0.4),
-    SyntheticDisc((105, 73.5), 50, "hexagon", 10, brightness=0.3),
+    SyntheticDisc((60, 60), 50, HEXAGON, brightness=0.4),
+    SyntheticDisc((105, 73.5), 50, HEXAGON, brightness=0.3),
 ]
 #: ... and one that overlaps much (70 %: too little of either is its own).
 HEAVY_OVERLAP = [
-    SyntheticDisc((60, 60), 50, "hexagon", 10, brightness=0.4),
-    SyntheticDisc((88, 66), 50, "hexagon", 10, brightness=0.3),
+    SyntheticDisc((60, 60), 50, HEXAGON, brightness=0.4),
+    SyntheticDisc((88, 66), 50, HEXAGON, brightness=0.3),
 ]
 ALL_BAD = [
-    SyntheticDisc((60, 60), 50, "hexagon", 10, brightness=2.5),  # saturated
-    SyntheticDisc((5, 160), 50, "hexagon", 10),  # cut by the frame
-    SyntheticDisc((160, 150), 50, "hexagon", 10),  # a pair that overlaps much
-    SyntheticDisc((188, 156), 50, "hexagon", 10, brightness=0.5),
+    SyntheticDisc((60, 60), 50, HEXAGON, brightness=2.5),  # saturated
+    SyntheticDisc((5, 160), 50, HEXAGON),  # cut by the frame
+    SyntheticDisc((160, 150), 50, HEXAGON),  # a pair that overlaps much
+    SyntheticDisc((188, 156), 50, HEXAGON, brightness=0.5),
 ]
 
 
@@ -293,7 +294,7 @@ def test_overlapping_discs_are_fitted_from_their_own_parts():
 
 
 def test_an_isolated_disc_has_no_light_left_out():
-    luminance = render([SyntheticDisc((60, 60), 40, "hexagon", 10)], 120, 120, seed=5)
+    luminance = render([SyntheticDisc((60, 60), 40, HEXAGON)], 120, 120, seed=5)
     discs = find_discs(luminance).discs
     assert crop_disc(luminance, discs[0], None, discs).ignored is None
 

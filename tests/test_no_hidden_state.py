@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 
 from bokehfit import cli
+from bokehfit.apertures import make_aperture
 from bokehfit.cli import adapter_from_environment, entry_point, main
 from bokehfit.errors import GPUUnavailableError, InputError
 from bokehfit.gpu import AdapterChoice, get_gpu
@@ -45,7 +46,8 @@ def test_similarity_json_records_the_argv_given_to_main(tmp_path, monkeypatch):
 
 
 def test_discs_json_records_the_argv_given_to_main(tmp_path, monkeypatch):
-    linear = render_discs(160, 120, [SyntheticDisc((60.3, 58.6), 40, "hexagon", angle_deg=12)], background=0.03, seed=2)
+    disc = SyntheticDisc((60.3, 58.6), 40, make_aperture("hexagon", 12))
+    linear = render_discs(160, 120, [disc], background=0.03, seed=2)
     photo = tmp_path / "bokeh.png"
     cv2.imwrite(str(photo), np.repeat(encode_srgb8(linear)[..., None], 3, axis=2))
     monkeypatch.setattr(sys, "argv", UNRELATED_ARGV)

@@ -224,7 +224,7 @@ def test_pixel_fit_varies_the_apertures_named_parameters():
     from bokehfit.fit.pixels import DISC_NAMES, fit_disc_pixels
     from bokehfit.synthetic import SyntheticDisc, render_discs
 
-    truth = SyntheticDisc((40.3, 39.6), 30.0, "slit", 25.0, aspect=0.4)
+    truth = SyntheticDisc((40.3, 39.6), 30.0, make_aperture("slit", 25.0, aspect=0.4))
     image = render_discs(80, 80, [truth], noise_sigma=0.002, seed=3)
     (disc,) = [d for d in find_discs(image, np.zeros(image.shape, bool)).discs if d.usable]
     family = next(f for f in FAMILIES if f.aperture.is_named("slit"))

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from test_cli_compare import PHOTO, bokehfit_cli, strict_json, write_jpeg, written
 
+from bokehfit.apertures import make_aperture
 from bokehfit.discs import find_discs
 from bokehfit.report.overlay import ROLE_BGR, draw_disc_overlay
 from bokehfit.synthetic import SyntheticDisc, render_discs
@@ -90,7 +91,7 @@ def test_discs_and_compare_share_discs_and_words(hexagon_run):
 
 
 def test_reports_of_two_photos_do_not_overwrite_each_other(tmp_path, gpu):
-    discs = [SyntheticDisc((40 + 60 * i, 50), 36, "hexagon", 10, brightness=0.6) for i in range(4)]
+    discs = [SyntheticDisc((40 + 60 * i, 50), 36, make_aperture("hexagon", 10), brightness=0.6) for i in range(4)]
     for name in ("a.jpg", "b.jpg"):
         write_jpeg(tmp_path / name, discs, width=280, height=100)
         done, _ = bokehfit_cli("compare", name, "--out-dir", "out", "--shapes", "circle,hexagon", cwd=tmp_path)
@@ -100,7 +101,7 @@ def test_reports_of_two_photos_do_not_overwrite_each_other(tmp_path, gpu):
 
 
 def test_without_outputs_nothing_is_written_and_it_says_so(tmp_path, gpu):
-    write_jpeg(tmp_path / "a.jpg", [SyntheticDisc((60, 60), 40, "hexagon", 10, brightness=0.6)])
+    write_jpeg(tmp_path / "a.jpg", [SyntheticDisc((60, 60), 40, make_aperture("hexagon", 10), brightness=0.6)])
     done, _ = bokehfit_cli("compare", "a.jpg", "--shapes", "hexagon", cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     assert "no files written" in done.stdout
@@ -108,7 +109,8 @@ def test_without_outputs_nothing_is_written_and_it_says_so(tmp_path, gpu):
 
 
 def test_unusable_discs_write_json_and_report_with_the_reason(tmp_path):
-    write_jpeg(tmp_path / "sat.jpg", [SyntheticDisc((5, 60), 50, "hexagon", 10), SyntheticDisc((215, 60), 40, "hexagon", 10)])
+    hexagon = make_aperture("hexagon", 10)
+    write_jpeg(tmp_path / "sat.jpg", [SyntheticDisc((5, 60), 50, hexagon), SyntheticDisc((215, 60), 40, hexagon)])
     done, _ = bokehfit_cli("compare", "sat.jpg", "--json", "res/sat.json", cwd=tmp_path)
     assert done.returncode == 1
     document = strict_json(tmp_path / "res" / "sat.json")
@@ -133,7 +135,7 @@ def test_no_acceptable_fit_writes_json_and_report(tmp_path, reference_photo, gpu
 
 def test_overlay_colours_roles_and_sizes_labels_to_the_picture():
     assert len(set(ROLE_BGR.values())) == 3
-    discs = [SyntheticDisc((100 + 200 * i, 150), 80, "circle", 0, brightness=0.5) for i in range(3)]
+    discs = [SyntheticDisc((100 + 200 * i, 150), 80, make_aperture("circle", 0), brightness=0.5) for i in range(3)]
     luminance = render_discs(700, 300, discs, noise_sigma=0.002, seed=2)
     found = find_discs(luminance).discs
     rgb = np.repeat(np.round(np.sqrt(np.clip(luminance, 0, 1)) * 255).astype(np.uint8)[..., None], 3, axis=-1)

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 import bokehfit.fit as fitting
+from bokehfit.apertures import make_aperture
 from bokehfit.discs import find_discs
 from bokehfit.errors import InputError, NoResultError
 from bokehfit.fit import FailedFit, FitFailedError, FitOptions, fit_aperture
@@ -30,7 +31,8 @@ LENS_KEYS = ("roundness", "squeeze", "vignetting", "rim", "chromatic")
 @pytest.fixture(scope="module")
 def hexagons():
     """(luminance, discs) of GRID_DISCS clean hexagons."""
-    discs = [SyntheticDisc((30 + 55 * (i % 4), 30 + 55 * (i // 4)), DIAMETER_PX, "hexagon", ANGLE_DEG, brightness=0.6)
+    hexagon = make_aperture("hexagon", ANGLE_DEG)
+    discs = [SyntheticDisc((30 + 55 * (i % 4), 30 + 55 * (i // 4)), DIAMETER_PX, hexagon, brightness=0.6)
              for i in range(GRID_DISCS)]
     luminance = render_discs(250, 140, discs, noise_sigma=SIGMA_NOISE, seed=7)
     search = find_discs(luminance, luminance >= 1.0)

@@ -26,6 +26,7 @@ import pytest
 from PIL import Image
 
 import bokehfit
+from bokehfit.apertures import make_aperture
 from bokehfit.survey.files import find_photos
 from bokehfit.synthetic import SyntheticDisc, encode_srgb8, render_discs
 
@@ -56,7 +57,7 @@ def disc_diameter_px(fnumber: float) -> float:
 def write_render(path: Path, fnumber: float, shape: str, seed: int) -> None:
     diameter = disc_diameter_px(fnumber)
     centres = [(40.0 + seed % 3, 40.0), (100.0, 40.0), (160.0, 40.0), (40.0, 100.0), (100.0, 100.0), (160.0, 100.0)]
-    discs = [SyntheticDisc(c, diameter, shape, 15.0) for c in centres[: 4 if diameter > 30 else 6]]
+    discs = [SyntheticDisc(c, diameter, make_aperture(shape, 15.0)) for c in centres[: 4 if diameter > 30 else 6]]
     linear = render_discs(WIDTH_PX, HEIGHT_PX, discs, background=0.03, noise_sigma=0.002, seed=seed)
     exif = Image.Exif()
     exif[0x0110] = CAMERA  # Model

@@ -134,7 +134,8 @@ def make_photo(spec: PhotoSpec, path: Path) -> None:
     from bokehfit.synthetic import SyntheticDisc, render_discs
 
     rng = np.random.default_rng(spec.seed)
-    reach = make_aperture(spec.shape, spec.angle_deg).extent() * math.sqrt(math.pi) / 2  # per px of diameter
+    aperture = make_aperture(spec.shape, spec.angle_deg)
+    reach = aperture.extent() * math.sqrt(math.pi) / 2  # per px of diameter
     discs: list = []
     colours: list = []
     for _ in range(MAX_PLACEMENT_TRIES):
@@ -142,8 +143,7 @@ def make_photo(spec: PhotoSpec, path: Path) -> None:
         r = reach * diameter
         centre = (float(rng.uniform(r + 10, spec.width - r - 10)), float(rng.uniform(r + 10, spec.height - r - 10)))
         if all(math.dist(centre, d.center_xy) > 1.5 * (r + reach * d.diameter_px) + 10 for d in discs):
-            discs.append(SyntheticDisc(centre, diameter, spec.shape, spec.angle_deg,
-                                       brightness=float(rng.uniform(0.3, 0.9))))
+            discs.append(SyntheticDisc(centre, diameter, aperture, brightness=float(rng.uniform(0.3, 0.9))))
             colours.append(LIGHT_COLOURS[int(rng.integers(len(LIGHT_COLOURS)))])
             if len(discs) == spec.discs:
                 break

@@ -82,8 +82,7 @@ def grid_layout(shape, blades, aspect, angle, diameters, rng, brightness=(0.3, 0
     for i, diameter in enumerate(diameters):
         row, column = divmod(i, columns)
         centre = ((column + 0.5) * cell + rng.uniform(-2, 2), (row + 0.5) * cell + rng.uniform(-2, 2))
-        truth.append(SyntheticDisc(centre, float(diameter), shape, angle, blades, aspect,
-                                   brightness=float(rng.uniform(*brightness))))
+        truth.append(SyntheticDisc(centre, float(diameter), aperture, brightness=float(rng.uniform(*brightness))))
     return truth, columns * cell, rows * cell
 
 

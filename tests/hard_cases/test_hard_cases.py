@@ -137,14 +137,16 @@ def test_thin_lens_in_float32_agrees_with_float64_at_extremes():
 
 
 def test_disc_touching_all_four_frame_edges():
-    image = render_discs(60, 60, [SyntheticDisc((29.5, 29.5), 75.0, "circle", brightness=0.5)], background=0.02)
+    disc = SyntheticDisc((29.5, 29.5), 75.0, make_aperture("circle"), brightness=0.5)
+    image = render_discs(60, 60, [disc], background=0.02)
     search = find_discs(image)
     assert all(d.clipped for d in search.discs)  # either none found or found and flagged
     assert not any(d.usable for d in search.discs)
 
 
 def test_two_discs_overlapping_by_90_percent():
-    truth = [SyntheticDisc((100.0, 80.0), 60.0, "hexagon", 5.0), SyntheticDisc((103.0, 81.0), 60.0, "hexagon", 5.0, brightness=0.5)]
+    hexagon = make_aperture("hexagon", 5.0)
+    truth = [SyntheticDisc((100.0, 80.0), 60.0, hexagon), SyntheticDisc((103.0, 81.0), 60.0, hexagon, brightness=0.5)]
     search = find_discs(render_discs(200, 160, truth, noise_sigma=0.002))
     assert 1 <= len(search.discs) <= 2
     biggest = search.discs[0]
@@ -156,7 +158,8 @@ def test_saturated_flat_topped_disc():
     its clipped pixels fitted as lower bounds, and gives the shape, the angle and the size."""
     from bokehfit.fit import fit_aperture
 
-    image = np.minimum(render_discs(160, 160, [SyntheticDisc((80.3, 79.8), 70.0, "pentagon", 8.0, brightness=5.0)],
+    disc = SyntheticDisc((80.3, 79.8), 70.0, make_aperture("pentagon", 8.0), brightness=5.0)
+    image = np.minimum(render_discs(160, 160, [disc],
                                     noise_sigma=0.002), 1.0)
     search = find_discs(image, image >= 1.0)
     assert len(search.discs) == 1 and search.discs[0].saturated and search.discs[0].usable
@@ -172,12 +175,14 @@ def test_saturated_flat_topped_disc():
 
 
 def test_a_4_px_disc_is_found_but_too_small_to_fit():
-    search = find_discs(render_discs(40, 40, [SyntheticDisc((20.2, 19.7), 4.5, "circle", brightness=0.8)], noise_sigma=0.002))
+    disc = SyntheticDisc((20.2, 19.7), 4.5, make_aperture("circle"), brightness=0.8)
+    search = find_discs(render_discs(40, 40, [disc], noise_sigma=0.002))
     assert len(search.discs) == 1 and not search.discs[0].resolvable
 
 
 def test_jpeg_quality_30():
-    truth = [SyntheticDisc((60.0 + 120 * i, 70.0), d, "hexagon", 12.0, brightness=0.6) for i, d in enumerate((24, 40, 64))]
+    hexagon = make_aperture("hexagon", 12.0)
+    truth = [SyntheticDisc((60.0 + 120 * i, 70.0), d, hexagon, brightness=0.6) for i, d in enumerate((24, 40, 64))]
     linear = render_discs(360, 140, truth, background=0.03, noise_sigma=0.003)
     _, data = cv2.imencode(".jpg", encode_srgb8(linear), [cv2.IMWRITE_JPEG_QUALITY, 30])
     decoded = cv2.imdecode(data, cv2.IMREAD_GRAYSCALE)
