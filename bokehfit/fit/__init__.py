@@ -292,6 +292,10 @@ SQUEEZE_SIGNAL = 1.03
 SQUEEZE_AGREEMENT = 0.06
 #: Least |rim| reported: a smaller one changes a disc's profile by under 5 % (below what a photo's discs show).
 MIN_RIM = 0.05
+#: A shape with more parameters than the circle is kept only where it fits the outlines of at least
+#: this share of the jointly fitted discs better than the circle does (each against its joint fit):
+#: blades are seen on the outlines, not in the light inside them or around them.
+OUTLINE_SUPPORT_SHARE = 0.75
 #: Most discs fitted jointly (the clearest first): the shared parameters are settled well before.
 JOINT_DISCS = 8
 #: A disc disagrees with the consensus when its angle is off by more than this many standard deviations ...
@@ -457,6 +461,11 @@ def _consensus_start(family: Family, fits: list[PixelFit], turned: list[bool]) -
         else:
             values[name] = float(np.median(own))
     return family.aperture.replace(**values) if values else family.aperture
+
+
+def _misfits(discs: list[Disc], aperture: Aperture, fits: list[PixelFit]) -> np.ndarray:
+    """Outline misfit (equal-area radii) of each of ``discs`` to one ``aperture``, as it shows at the disc's field position."""
+    return np.array([outline_misfit(d.outline_xy, aperture, f.field_position) for d, f in zip(discs, fits)])
 
 
 def _at_bound(aperture: Aperture, feature: str) -> bool:
@@ -719,8 +728,12 @@ def fit_aperture(
     added = [f for f in feature_tests if f in joint.aperture.enabled_features]
     if "squeeze" in tests and "aspect" in winner.aperture.parameters and "squeeze" not in added:
         added.append("squeeze")
+    # Blades and their angle are seen on the outlines: where the simplest model fits the discs'
+    # outlines better than the winner does (each against its jointly fitted aperture), the pixels
+    # chose the winner for something else (the surround, the light inside) and the outlines do
+    # not show its blades.
     simplest = FAMILIES[0]
-    if added and simplest in families and winner.base != simplest:
+    if simplest in families and winner.base != simplest:
         start_values = {n: v for n, v in joint.aperture.values.items() if any(n.startswith(f) for f in added)}
         plain = simplest.aperture.with_features(*added).replace(**start_values)
         if "squeeze" in added and "squeeze" not in start_values:
@@ -728,9 +741,20 @@ def fit_aperture(
         untouched = [dataclasses.replace(c, turned=False) for c in joint_crops]
         trial = fit_discs(untouched, simplest, plain, noise=noise,
                           disc_starts=[crops[i].values_of(f) for i, f in zip(joint_ids, joint.fits)])
-        if trial.bic <= joint.bic:
-            notes.append(f"with the {' and the '.join(added)} in the model, the {simplest.aperture.display_name} explains "
-                         f"the discs better than the {winner.aperture.display_name} chosen without (ΔBIC {joint.bic - trial.bic:.0f})")
+        winner_misfits = _misfits(joint_discs, joint.aperture, joint.fits)
+        plain_misfits = _misfits(joint_discs, trial.aperture, trial.fits)
+        shown = float(np.mean(plain_misfits > winner_misfits))
+        switch = None
+        if added and trial.bic <= joint.bic:
+            switch = (f"with the {' and the '.join(added)} in the model, the {simplest.aperture.display_name} explains "
+                      f"the discs better than the {winner.aperture.display_name} chosen without (ΔBIC {joint.bic - trial.bic:.0f})")
+        elif shown < OUTLINE_SUPPORT_SHARE:
+            switch = (f"the {winner.aperture.display_name} that the discs' pixels favour fits the outlines of only "
+                      f"{round(shown * len(joint_discs))} of {len(joint_discs)} discs better than the "
+                      f"{simplest.aperture.display_name} (median misfit {np.median(winner_misfits):.3f} against "
+                      f"{np.median(plain_misfits):.3f} of their radius): the outlines do not show its blades")
+        if switch is not None:
+            notes.append(switch)
             winner, joint, turned = simplest, trial, [False] * len(turned)
             winner_screens = [found[winner] for found in screens_of]
             crops = [dataclasses.replace(c, turned=False) for c in crops]

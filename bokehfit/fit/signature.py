@@ -101,11 +101,13 @@ def _centroid(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
 
 def outline_misfit(outline_xy: np.ndarray, aperture: Aperture, field_position=None) -> float:
     """RMS misfit (equal-area radii) of a disc's outline to ``aperture`` as a disc at ``field_position``
-    shows it (cut by its vignetting there), at the best rotation: the screen's score for one aperture."""
+    shows it (cut by its vignetting there), at the best rotation: the screen's score for one aperture.
+    A squeeze or a vignetting cut is fixed in the frame, so a squeezed or cut aperture is compared
+    as the frame shows it (turned by its angle, then squeezed and cut), not turned whole."""
     observed = radial_signature(outline_xy)
-    if aperture.vignetting is None or field_position is None:
+    if aperture.squeeze == 1.0 and (aperture.vignetting is None or field_position is None):
         return _best_shift(observed, _model_signature(aperture))[1]
-    # The cut outline: its largest loop, resampled evenly along its length (a straight side is one point).
+    # The outline in the frame: its largest loop, resampled evenly along its length (a straight side is one point).
     loop = max(aperture.outline(field_position).polylines(1e-4), key=len)
     closed = np.vstack([loop, loop[:1]])
     along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(closed, axis=0).T))])
