@@ -19,7 +19,7 @@ from skimage import measure
 
 from bokehfit import __version__
 from bokehfit.apertures import Aperture
-from bokehfit.discs import DEFAULT_MIN_DIAMETER_PX, MIN_FIT_SEEN, Disc, DiscSearch, find_discs
+from bokehfit.discs import COMPARE_MIN_DIAMETER_PX, MIN_FIT_SEEN, Disc, DiscSearch, find_discs
 from bokehfit.discs.measure import RESOLVABLE_PX
 from bokehfit.errors import InputError
 from bokehfit.fit import LENS_FEATURES, ApertureFit, FailedFit, FitOptions, fit_aperture
@@ -625,7 +625,7 @@ def compare_photo(
     sensor_width_mm: float | None = None,
     focus_distance_m: float | None = None,
     light_distance_m: float = math.inf,
-    min_diameter_px: float = DEFAULT_MIN_DIAMETER_PX,
+    min_diameter_px: float = COMPARE_MIN_DIAMETER_PX,
     max_diameter_px: float = 500.0,
     fit_options: FitOptions | None = None,
     progress=None,
@@ -635,8 +635,9 @@ def compare_photo(
 
     ``progress``, when given, is called with a stage name as each one starts
     and with (done, total) while discs are fitted. ``min_diameter_px`` is the
-    detection's, shared with ``bokehfit discs`` so both find the same discs;
-    discs under ``RESOLVABLE_PX`` are found but not usable. ``fit_options`` is
+    detection's: by default the smallest disc that shows a shape (``RESOLVABLE_PX``);
+    with ``bokehfit discs``'s 4 px both find the same discs, and those under
+    ``RESOLVABLE_PX`` are found but not usable. ``fit_options`` is
     the fit's budget (:class:`bokehfit.fit.FitOptions`); ``adapter`` chooses
     the GPU of the kernel (:func:`bokehfit.gpu.get_gpu`).
     Raises ``InputError`` for unreadable input; every other outcome is a

@@ -15,8 +15,7 @@ import sys
 from pathlib import Path
 
 from bokehfit.compare import Comparison, compare_photo
-from bokehfit.discs import DEFAULT_MAX_DIAMETER_PX, DEFAULT_MIN_DIAMETER_PX
-from bokehfit.discs.measure import RESOLVABLE_PX
+from bokehfit.discs import COMPARE_MIN_DIAMETER_PX, DEFAULT_MAX_DIAMETER_PX, DEFAULT_MIN_DIAMETER_PX
 from bokehfit.errors import InputError, NoResultError, check_positive
 from bokehfit.fit import FOCUS_SIDES
 from bokehfit.optics import LENS_MODELS, SIZE_CONVENTIONS
@@ -58,9 +57,10 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--focus-distance-m", type=arg_type("focus_distance_m", "--focus-distance-m"), help="focus distance (default: from EXIF)")
     parser.add_argument("--light-distance-m", type=arg_type("light_distance_m", "--light-distance-m"), default=math.inf, help="the lights' distance, a number or inf; without it the f-stop printed is an upper bound "
                         "(its value for lights at infinity) (default: %(default)s)")
-    parser.add_argument("--min-diameter-px", type=float, default=DEFAULT_MIN_DIAMETER_PX,
-                        help=f"smallest disc sought (default {DEFAULT_MIN_DIAMETER_PX:g}, as for `bokehfit discs`; "
-                             f"discs under {RESOLVABLE_PX:g} px are reported but cannot show a shape)")
+    parser.add_argument("--min-diameter-px", type=float, default=COMPARE_MIN_DIAMETER_PX,
+                        help=f"smallest disc sought (default {COMPARE_MIN_DIAMETER_PX:g}: the smallest that can show a "
+                             f"shape; {DEFAULT_MIN_DIAMETER_PX:g} counts the smaller glints as `bokehfit discs` does, "
+                             f"reported but not fitted, at about twice the search time on a large photo)")
     parser.add_argument("--max-diameter-px", type=float, default=DEFAULT_MAX_DIAMETER_PX,
                         help="largest disc sought, pixels, or inf for no limit (default %(default)g, as for `bokehfit discs`)")
     parser.set_defaults(run=run)

@@ -45,6 +45,7 @@ __all__ = [
     "Rejection",
     "find_discs",
     "DEFAULT_MIN_DIAMETER_PX",
+    "COMPARE_MIN_DIAMETER_PX",
     "DEFAULT_MAX_DIAMETER_PX",
     "MAX_CANDIDATES",
     "MAX_LUMINANCE",
@@ -57,7 +58,12 @@ __all__ = [
     "USABLE_EVIDENCE",
 ]
 
+#: Smallest disc the detector seeks by default (``bokehfit discs``): glints from 4 px are counted.
 DEFAULT_MIN_DIAMETER_PX = 4.0
+#: Smallest disc ``compare`` seeks by default: the smallest that shows its shape (RESOLVABLE_PX).
+#: Smaller glints say nothing of the aperture, and seeking them is most of the search's work on
+#: a large photo (their band is searched at full resolution, and there are thousands of them).
+COMPARE_MIN_DIAMETER_PX = RESOLVABLE_PX
 DEFAULT_MAX_DIAMETER_PX = 500.0
 #: Most candidates measured per photo (the clearest first); the rest are counted as rejected.
 #: A measurement takes about 1–3 ms, so this bounds the measuring to a few seconds.

@@ -739,13 +739,19 @@ def fit_aperture(
         if "squeeze" in added and "squeeze" not in start_values:
             plain = _add_feature(plain, "squeeze", joint.fits, joint_discs)
         untouched = [dataclasses.replace(c, turned=False) for c in joint_crops]
-        trial = fit_discs(untouched, simplest, plain, noise=noise,
-                          disc_starts=[crops[i].values_of(f) for i, f in zip(joint_ids, joint.fits)])
+
+        def plain_fit():
+            return fit_discs(untouched, simplest, plain, noise=noise,
+                             disc_starts=[crops[i].values_of(f) for i, f in zip(joint_ids, joint.fits)])
+
+        # With no feature on, the plain circle has no parameter that changes its outline: no fit is
+        # needed to measure how well it fits the outlines, only to take its place.
+        trial = plain_fit() if added else None
         winner_misfits = _misfits(joint_discs, joint.aperture, joint.fits)
-        plain_misfits = _misfits(joint_discs, trial.aperture, trial.fits)
+        plain_misfits = _misfits(joint_discs, *((trial.aperture, trial.fits) if trial else (plain, joint.fits)))
         shown = float(np.mean(plain_misfits > winner_misfits))
         switch = None
-        if added and trial.bic <= joint.bic:
+        if trial is not None and trial.bic <= joint.bic:
             switch = (f"with the {' and the '.join(added)} in the model, the {simplest.aperture.display_name} explains "
                       f"the discs better than the {winner.aperture.display_name} chosen without (ΔBIC {joint.bic - trial.bic:.0f})")
         elif shown < OUTLINE_SUPPORT_SHARE:
@@ -755,7 +761,7 @@ def fit_aperture(
                       f"{np.median(plain_misfits):.3f} of their radius): the outlines do not show its blades")
         if switch is not None:
             notes.append(switch)
-            winner, joint, turned = simplest, trial, [False] * len(turned)
+            winner, joint, turned = simplest, trial or plain_fit(), [False] * len(turned)
             winner_screens = [found[winner] for found in screens_of]
             crops = [dataclasses.replace(c, turned=False) for c in crops]
     seen_aperture = joint.aperture
