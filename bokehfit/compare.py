@@ -22,7 +22,7 @@ from bokehfit.apertures import Aperture
 from bokehfit.discs import COMPARE_MIN_DIAMETER_PX, MIN_FIT_SEEN, Disc, DiscSearch, find_discs
 from bokehfit.discs.measure import RESOLVABLE_PX
 from bokehfit.errors import InputError
-from bokehfit.fit import LENS_FEATURES, ApertureFit, FailedFit, FitOptions, fit_aperture
+from bokehfit.fit import LENS_FEATURES, REGULAR_OUTLINE_MISFIT, ApertureFit, FailedFit, FitOptions, fit_aperture
 from bokehfit.gpu import AdapterChoice
 from bokehfit.io import Photo, load_photo
 from bokehfit.io.colour import luminance_weights
@@ -69,10 +69,9 @@ MIN_ACCEPTABLE_IOU = 0.6
 #: ... and sure when, besides a clear BIC margin, they match this well with at least MIN_SURE_DISCS discs.
 MIN_SURE_IOU = 0.85
 MIN_SURE_DISCS = 3
-#: ... and the discs' outlines follow the shape: median radial misfit (in equal-area radii) at most this.
-#: Bokeh discs of a real lens show 0.01–0.05 (noise, JPEG, a little bloom); out-of-focus petals,
-#: leaves and merged glows 0.1 and more.
-MAX_SURE_OUTLINE_MISFIT = 0.08
+#: ... and the discs' outlines follow the shape: median radial misfit (in equal-area radii) at most
+#: this (:data:`bokehfit.fit.REGULAR_OUTLINE_MISFIT`, the fit's "regular" outline).
+MAX_SURE_OUTLINE_MISFIT = REGULAR_OUTLINE_MISFIT
 #: The kernel is drawn at the fitted angle, so each disc's best alignment with
 #: it is searched within this many degrees.
 ALIGNMENT_SEARCH_DEG = 10.0

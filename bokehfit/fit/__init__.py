@@ -63,6 +63,8 @@ __all__ = [
     "Parameter",
     "fit_aperture",
     "FOCUS_SIDES",
+    "LENS_FEATURES",
+    "REGULAR_OUTLINE_MISFIT",
 ]
 
 FOCUS_SIDES = ("far", "near", "unknown")
@@ -292,6 +294,14 @@ SQUEEZE_SIGNAL = 1.03
 SQUEEZE_AGREEMENT = 0.06
 #: Least |rim| reported: a smaller one changes a disc's profile by under 5 % (below what a photo's discs show).
 MIN_RIM = 0.05
+#: A disc's outline is regular when some aperture shape (not an elongated one) fits it this well:
+#: median radial misfit in equal-area radii. Bokeh discs of a real lens show 0.01–0.05 (noise,
+#: JPEG, a little bloom); out-of-focus petals, leaves, discs cut by a blade and merged glows 0.1
+#: and more. Regular discs are fitted before irregular ones, and a sure fit needs its discs'
+#: median misfit at most this (bokehfit.compare).
+REGULAR_OUTLINE_MISFIT = 0.08
+#: The discs fitted are chosen from this many times the budget (max_discs) of the clearest ones.
+CHOICE_POOL = 4
 #: A shape with more parameters than the circle is kept only where it fits the outlines of at least
 #: this share of the jointly fitted discs better than the circle does (each against its joint fit):
 #: blades are seen on the outlines, not in the light inside them or around them.
@@ -308,12 +318,29 @@ MIN_OUTLIER_RMS = 0.05
 
 
 def _order_for_fit(discs: list[Disc], max_discs: int) -> list[Disc]:
-    """The discs fitted: those on their own before those beside or on other light (fitted with that
-    light left out); within each, clean ones first, then edges, then outlines seen in part; the
-    largest and clearest first."""
+    """The clearest usable discs, at most ``max_discs``: those on their own before those beside or on
+    other light (fitted with that light left out); within each, clean ones first, then edges, then
+    outlines seen in part; the largest and clearest first."""
     usable = [d for d in discs if d.usable]
     usable.sort(key=lambda d: (d.overlaps, USABLE_EVIDENCE.index(d.evidence), -d.diameter_px * min(d.snr, 50.0)))
     return usable[:max_discs]
+
+
+def _regular(screens: list[Screen]) -> bool:
+    """Whether some aperture shape that is not elongated fits the outline well (REGULAR_OUTLINE_MISFIT)."""
+    misfits = [s.rms for s in screens if "aspect" not in s.family.aperture.parameters] or [s.rms for s in screens]
+    return min(misfits) <= REGULAR_OUTLINE_MISFIT
+
+
+def _choose_discs(discs: list[Disc], families: tuple[Family, ...], max_discs: int) -> tuple[list[Disc], list[list[Screen]]]:
+    """The discs fitted, with their screens: from the CHOICE_POOL · ``max_discs`` clearest
+    (:func:`_order_for_fit`), those whose outline some shape explains (:func:`_regular`) first,
+    each group in that order. Among real photos' discs the clearest are often not discs at all
+    (a lit leaf, a disc cut by a blade, two merged glows): the outline says so."""
+    pool = _order_for_fit(discs, CHOICE_POOL * max_discs)
+    screened = [screen(d.outline_xy, families, _slit_aspect(d), d.outline_reliable) for d in pool]
+    order = sorted(range(len(pool)), key=lambda i: (pool[i].overlaps, not _regular(screened[i])))[:max_discs]
+    return [pool[i] for i in order], [screened[i] for i in order]
 
 
 def _slit_aspect(disc: Disc) -> float:
@@ -629,7 +656,11 @@ def fit_aperture(
     if clipped is not None and np.shape(clipped) != np.shape(luminance):
         raise InputError(f"clipped must have the luminance's shape {np.shape(luminance)} (got {np.shape(clipped)})")
     families = families_for(shapes)
-    chosen = _order_for_fit(discs, options.max_discs)
+    # Every family is screened straight and, where it has blades, rounded (design.md §3b): a
+    # rounded 7-gon looks more like a 12-gon than a 7-gon to a straight-only screen.
+    rounded_of = {f: f.rounded for f in families if f.rounded is not None}
+    screen_families = (*families, *rounded_of.values())
+    chosen, screened = _choose_discs(discs, screen_families, options.max_discs)
     if not chosen:
         flagged = {
             "cut by the frame": sum(d.clipped for d in discs),
@@ -641,11 +672,6 @@ def fit_aperture(
         return FailedFit("no_discs", f"no disc is clean enough to fit ({found})", time_s=time.perf_counter() - start)
 
     crops = [crop_disc(luminance, d, clipped, discs) for d in chosen]
-    # Every family is screened straight and, where it has blades, rounded (design.md §3b): a
-    # rounded 7-gon looks more like a 12-gon than a 7-gon to a straight-only screen.
-    rounded_of = {f: f.rounded for f in families if f.rounded is not None}
-    screen_families = (*families, *rounded_of.values())
-    screened = [screen(d.outline_xy, screen_families, _slit_aspect(d), d.outline_reliable) for d in chosen]
     screens_of = [{s.family: s for s in disc_screens} for disc_screens in screened]
     mean_rms = {f: np.mean([found[f].rms for found in screens_of]) for f in screen_families}
     best_rms = {f: min(mean_rms[f], mean_rms[rounded_of[f]]) if f in rounded_of else mean_rms[f] for f in families}
@@ -728,10 +754,11 @@ def fit_aperture(
     added = [f for f in feature_tests if f in joint.aperture.enabled_features]
     if "squeeze" in tests and "aspect" in winner.aperture.parameters and "squeeze" not in added:
         added.append("squeeze")
-    # Blades and their angle are seen on the outlines: where the simplest model fits the discs'
-    # outlines better than the winner does (each against its jointly fitted aperture), the pixels
-    # chose the winner for something else (the surround, the light inside) and the outlines do
-    # not show its blades.
+    # Blades and their angle are seen on every disc: the winner, chosen on the first model_discs,
+    # must show one angle (and one elongation) on all the discs kept, and fit most of their
+    # outlines better than the simplest model does (each against its jointly fitted aperture);
+    # otherwise the pixels chose it for something else (the surround, the light inside) and the
+    # outlines do not show its blades.
     simplest = FAMILIES[0]
     if simplest in families and winner.base != simplest:
         start_values = {n: v for n, v in joint.aperture.values.items() if any(n.startswith(f) for f in added)}
@@ -754,6 +781,8 @@ def fit_aperture(
         if trial is not None and trial.bic <= joint.bic:
             switch = (f"with the {' and the '.join(added)} in the model, the {simplest.aperture.display_name} explains "
                       f"the discs better than the {winner.aperture.display_name} chosen without (ΔBIC {joint.bic - trial.bic:.0f})")
+        elif (doubt := _unsupported(winner, [winner_fits[i] for i in kept])) is not None:
+            switch = f"not a {winner.aperture.display_name}: on all {len(kept)} discs fitted, {doubt}"
         elif shown < OUTLINE_SUPPORT_SHARE:
             switch = (f"the {winner.aperture.display_name} that the discs' pixels favour fits the outlines of only "
                       f"{round(shown * len(joint_discs))} of {len(joint_discs)} discs better than the "
