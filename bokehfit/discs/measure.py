@@ -125,6 +125,10 @@ _SUBPIXEL = 16
 MAX_ELONGATION = 15.0
 EDGE_WIDTH_MIN_PX = 3.0
 EDGE_WIDTH_MAX_REL = 0.6
+#: Faint discs' outlines: the crop is smoothed until the noise moves the 50 % contour by about this
+#: much (px), with a Gaussian of at most OUTLINE_SMOOTH_REL of the disc's radius.
+OUTLINE_JITTER_PX = 0.2
+OUTLINE_SMOOTH_REL = 0.08
 #: Equal-area diameter from which a disc shows its shape.
 RESOLVABLE_PX = 8.0
 #: Share of a disc's pixels that may be clipped in the source before it counts as saturated.
@@ -612,7 +616,7 @@ def _closed_outline(luminance, center_xy, radius, reach, core_rel=0.8, percentil
             bridged_crop, bridged = _close_ring(crop, distance, level, plateau, radius)
         else:
             bridged_crop, bridged = _bridge_occluders(crop, distance, level, plateau, radius)
-        outline = _outline(bridged_crop, level, background, seed_rc)
+        outline = _outline(_quieted(bridged_crop, plateau - background, noise, radius), level, background, seed_rc)
         if outline is None and core_rel == RING_CORE_REL:
             arc = _ring_arc(crop, level, seed_rc, radius)
             if arc is not None:  # a rim that breaks: its arcs, and the circle through them
@@ -633,6 +637,20 @@ def _closed_outline(luminance, center_xy, radius, reach, core_rel=0.8, percentil
     if on_cut.mean() > MAX_CUT_SHARE:  # mostly the cutting circle: a piece of something larger
         return "part of a larger region"
     return window, crop, (background, plateau, noise, ring_lift), outline, True, None, on_cut
+
+
+def _quieted(crop: np.ndarray, contrast: float, noise: float, radius: float) -> np.ndarray:
+    """``crop`` smoothed where the noise would make its 50 % contour jitter: the contour moves by
+    about noise / gradient = (noise / contrast) · EDGE_WIDTH_MIN_PX px, and a Gaussian of σ px
+    lowers white noise 2√π·σ times; σ is the least that brings the jitter to OUTLINE_JITTER_PX,
+    at most OUTLINE_SMOOTH_REL of the radius (a blade's corner is rounded by about σ)."""
+    jitter = noise / max(contrast, 1e-12) * EDGE_WIDTH_MIN_PX
+    if jitter <= OUTLINE_JITTER_PX:
+        return crop
+    sigma = min(jitter / OUTLINE_JITTER_PX / (2.0 * math.sqrt(math.pi)), OUTLINE_SMOOTH_REL * radius)
+    if sigma < 0.5:
+        return crop
+    return cv2.GaussianBlur(np.ascontiguousarray(crop, dtype=np.float32), (0, 0), sigma, borderType=cv2.BORDER_REPLICATE)
 
 
 def _contrast_ok(contrast: float, noise: float, background: float, diameter_px: float) -> bool:
