@@ -277,7 +277,7 @@ def timing_scene(seed=11):
     """About TIMING_DISCS discs, log-uniform diameters, cycling shapes, placed at random without overlaps."""
     rng = np.random.default_rng(seed)
     width, height = TIMING_SIZE
-    shapes = list(SHAPES)
+    shapes = [name for name, spec in SHAPES.items() if not spec.tabulated]  # a mask needs its image: outlines only
     placed, truth = [], []
     attempts = 0
     while len(truth) < TIMING_DISCS and attempts < 100_000:
