@@ -123,7 +123,8 @@ def photos(only: list[str] | None, json_rows: list) -> None:
             result = run_compare(path, Path(tmp) / f"{Path(entry['file']).stem}.json")
             discs = result.get("discs", [])
             used = [d for d in discs if d.get("used")]
-            as_what = Counter(d.get("used_as") for d in used)
+            # "outline (saturated: 12 clipped pixels ...)" and the like, counted by their kind
+            as_what = Counter((d.get("used_as") or "").split(" (")[0] for d in used)
             left_out = Counter(reason for d in discs if not d.get("used") for reason in d.get("rejected_because", []))
             verdict = judge(label, result)
             verdicts[verdict.split(" (")[0]] += 1
