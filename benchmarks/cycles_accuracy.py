@@ -32,6 +32,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from bokehfit.apertures import Aperture, make_aperture
+
 DATA = Path(__file__).resolve().parents[1] / "tests" / "data" / "cycles"
 TARGET_BLADES = 0.95
 TARGET_ANGLE_DEG = 1.0
@@ -59,13 +61,6 @@ def compare(path: Path, render: dict, out: Path) -> dict:
     return result
 
 
-def angle_error(fitted: float | None, true: float, symmetry: float) -> float | None:
-    if fitted is None:
-        return None
-    difference = (fitted - true) % symmetry
-    return min(difference, symmetry - difference)
-
-
 def score(render: dict, result: dict) -> dict:
     aperture = result.get("aperture") or {}
     shape, blades = aperture.get("shape"), aperture.get("blades")
@@ -81,8 +76,9 @@ def score(render: dict, result: dict) -> dict:
     else:
         row["blades_right"] = blades == render["blades"]
         if row["blades_right"]:
-            symmetry = 360.0 / render["blades"]
-            row["angle_error_deg"] = angle_error(aperture.get("angle_deg"), render["angle_deg"], symmetry)
+            # The rotation between the outlines, whatever each shape's angle convention (a square's).
+            truth = make_aperture("ngon", render["angle_deg"], blades=render["blades"], roundness=render["roundness"])
+            row["angle_error_deg"] = Aperture.from_json(aperture).misalignment_deg(truth)
     roundness = 1.0 if shape == "circle" else aperture.get("roundness")
     if roundness is not None:
         row["roundness_error"] = abs(roundness - render["roundness"])

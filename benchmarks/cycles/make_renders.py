@@ -18,7 +18,7 @@ It writes each render (8-bit sRGB PNG, and for some a 16-bit PNG too) and
 ``truth.json``; ``--only`` renders some of them and merges their entries into
 an existing ``truth.json``; ``--truth-only`` rewrites ``truth.json`` from the
 files there. Rendering is on the CPU, without denoising; the full set took
-about 20 minutes on two busy cores (each render's time is in ``truth.json``).
+about 30 minutes on two busy cores (each render's time is in ``truth.json``).
 
 Scene and derivations
 ---------------------
@@ -223,6 +223,17 @@ def renders() -> list[Render]:
                       samples=4096))
     out.append(Render("rim_dark_circle", "circle, bright centre (rim −0.6)", "circle", None, 1.0, 0.0,
                       _grid(4, 3, 60, 50, seed=11, jitter=8, level=0.5), rim=-0.6, samples=4096))
+    # The second set: the ends of the blade range, and rounder blades.
+    out.append(Render("ngon3_round0_angle20", "3 straight blades, turned 20°; far and near lights",
+                      "ngon", 3, 0.0, 20.0, _mixed("FFNF FNFF NFFN", seed=12)))
+    out.append(Render("ngon4_round05_angle10", "4 blades, roundness 0.5, turned 10°", "ngon", 4, 0.5, 10.0,
+                      _grid(4, 3, 60, 50, seed=13, jitter=8)))
+    out.append(Render("ngon10_round02_angle5", "10 blades, roundness 0.2, turned 5°", "ngon", 10, 0.2, 5.0,
+                      _grid(4, 3, 60, 50, seed=14, jitter=8)))
+    out.append(Render("ngon12_round0_angle7", "12 straight blades, turned 7°", "ngon", 12, 0.0, 7.0,
+                      _grid(4, 3, 60, 50, seed=15, jitter=8)))
+    out.append(Render("ngon6_round08_angle20", "6 blades, roundness 0.8, turned 20°: nearly round", "ngon", 6, 0.8, 20.0,
+                      _grid(4, 3, 60, 50, seed=16, jitter=8)))
     return out
 
 
@@ -420,7 +431,7 @@ def build_scene(render: Render, samples: int, threads: int, seed: int):
     cycles.samples = samples
     cycles.use_adaptive_sampling = True
     cycles.adaptive_threshold = ADAPTIVE_THRESHOLD
-    cycles.adaptive_min_samples = ADAPTIVE_MIN_SAMPLES
+    cycles.adaptive_min_samples = min(ADAPTIVE_MIN_SAMPLES, samples)
     cycles.use_denoising = False
     cycles.max_bounces = 0
     cycles.diffuse_bounces = 0
