@@ -790,7 +790,7 @@ def fit_aperture(
                       f"{np.median(plain_misfits):.3f} of their radius): the outlines do not show its blades")
         if switch is not None:
             notes.append(switch)
-            winner, joint, turned = simplest, trial or plain_fit(), [False] * len(turned)
+            winner, joint, turned = simplest, trial if trial is not None else plain_fit(), [False] * len(turned)
             winner_screens = [found[winner] for found in screens_of]
             crops = [dataclasses.replace(c, turned=False) for c in crops]
     seen_aperture = joint.aperture
