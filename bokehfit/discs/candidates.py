@@ -93,7 +93,7 @@ BAND_OVERLAP_HIGH = 1.25
 MIN_NOISE = 1e-4
 #: Pixels of a band's image searched at a time (whole rows, and the margins the opening and
 #: the blobs need): the search's temporaries stay a small share of the photo's own arrays.
-STRIP_PIXELS = 1 << 20
+STRIP_PIXELS = 1 << 19
 
 
 @dataclass(frozen=True)

@@ -332,15 +332,16 @@ def _regular(screens: list[Screen]) -> bool:
     return min(misfits) <= REGULAR_OUTLINE_MISFIT
 
 
-def _choose_discs(discs: list[Disc], families: tuple[Family, ...], max_discs: int) -> tuple[list[Disc], list[list[Screen]]]:
-    """The discs fitted, with their screens: from the CHOICE_POOL · ``max_discs`` clearest
-    (:func:`_order_for_fit`), those whose outline some shape explains (:func:`_regular`) first,
-    each group in that order. Among real photos' discs the clearest are often not discs at all
-    (a lit leaf, a disc cut by a blade, two merged glows): the outline says so."""
+def _choose_discs(discs: list[Disc], families: tuple[Family, ...], max_discs: int) -> list[Disc]:
+    """The discs fitted: from the CHOICE_POOL · ``max_discs`` clearest (:func:`_order_for_fit`),
+    those whose outline one of ``families`` explains (:func:`_regular`) first, each group in that
+    order. Among real photos' discs the clearest are often not discs at all (a lit leaf, a disc
+    cut by a blade, two merged glows): the outline says so. The straight families suffice (a
+    rounded polygon lies between its straight one and the circle) and keep the screen cheap."""
     pool = _order_for_fit(discs, CHOICE_POOL * max_discs)
-    screened = [screen(d.outline_xy, families, _slit_aspect(d), d.outline_reliable) for d in pool]
-    order = sorted(range(len(pool)), key=lambda i: (pool[i].overlaps, not _regular(screened[i])))[:max_discs]
-    return [pool[i] for i in order], [screened[i] for i in order]
+    regular = [_regular(screen(d.outline_xy, families, _slit_aspect(d), d.outline_reliable)) for d in pool]
+    order = sorted(range(len(pool)), key=lambda i: (pool[i].overlaps, not regular[i]))[:max_discs]
+    return [pool[i] for i in order]
 
 
 def _slit_aspect(disc: Disc) -> float:
@@ -656,11 +657,7 @@ def fit_aperture(
     if clipped is not None and np.shape(clipped) != np.shape(luminance):
         raise InputError(f"clipped must have the luminance's shape {np.shape(luminance)} (got {np.shape(clipped)})")
     families = families_for(shapes)
-    # Every family is screened straight and, where it has blades, rounded (design.md §3b): a
-    # rounded 7-gon looks more like a 12-gon than a 7-gon to a straight-only screen.
-    rounded_of = {f: f.rounded for f in families if f.rounded is not None}
-    screen_families = (*families, *rounded_of.values())
-    chosen, screened = _choose_discs(discs, screen_families, options.max_discs)
+    chosen = _choose_discs(discs, families, options.max_discs)
     if not chosen:
         flagged = {
             "cut by the frame": sum(d.clipped for d in discs),
@@ -672,6 +669,11 @@ def fit_aperture(
         return FailedFit("no_discs", f"no disc is clean enough to fit ({found})", time_s=time.perf_counter() - start)
 
     crops = [crop_disc(luminance, d, clipped, discs) for d in chosen]
+    # Every family is screened straight and, where it has blades, rounded (design.md §3b): a
+    # rounded 7-gon looks more like a 12-gon than a 7-gon to a straight-only screen.
+    rounded_of = {f: f.rounded for f in families if f.rounded is not None}
+    screen_families = (*families, *rounded_of.values())
+    screened = [screen(d.outline_xy, screen_families, _slit_aspect(d), d.outline_reliable) for d in chosen]
     screens_of = [{s.family: s for s in disc_screens} for disc_screens in screened]
     mean_rms = {f: np.mean([found[f].rms for found in screens_of]) for f in screen_families}
     best_rms = {f: min(mean_rms[f], mean_rms[rounded_of[f]]) if f in rounded_of else mean_rms[f] for f in families}
