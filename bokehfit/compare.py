@@ -186,11 +186,15 @@ class Comparison:
         fit = self.fit
         what = _describe(self.aperture_json())
         margin = fit.margin_bic
+        runner_up = fit.runner_up.family.aperture.display_name if fit.runner_up is not None else None
         if margin is None:
             evidence = "only one model was tried"
+        elif margin < 0:  # set aside by the consensus or the outlines, whatever the pixels say (the notes say why)
+            evidence = f"the pixels alone favour a {runner_up} (ΔBIC {-margin:.0f})"
         else:
-            evidence = f"{evidence_words(margin)} evidence over a {fit.runner_up.family.aperture.display_name} (ΔBIC {margin:.0f})"
-        agree = f"{len(fit.disc_fits)} disc{'s' if len(fit.disc_fits) != 1 else ''} {'agree' if len(fit.disc_fits) != 1 else 'fitted'}"
+            evidence = f"{evidence_words(margin)} evidence over a {runner_up} (ΔBIC {margin:.0f})"
+        count = len(fit.disc_fits)
+        agree = f"{count} disc{'s' if count != 1 else ''} {'agree' if count != 1 and status == 'fitted' else 'fitted'}"
         if status == "fitted":
             return f"Sure: {what}; {agree}, {evidence}."
         return f"Unsure: {what}, because {' and '.join(self.doubts)} ({agree}, {evidence})."
@@ -702,7 +706,8 @@ def compare_photo(
 def judge(fit: ApertureFit, metrics: dict[str, float | None]) -> tuple[list[str], str | None]:
     """Doubts about a fit, and the reason to reject it, from the evidence (stated thresholds)."""
     doubts = []
-    if not fit.sure:
+    margin = fit.margin_bic
+    if fit.close_runner_up and not (margin is not None and margin < 0 and fit.notes):
         doubts.append(f"the runner-up ({fit.runner_up.family.aperture.display_name}) fits almost as well")
     doubts.extend(fit.notes)
     if fit.outline_misfit > MAX_SURE_OUTLINE_MISFIT:

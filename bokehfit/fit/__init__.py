@@ -147,6 +147,8 @@ class ApertureFit:
     candidates: list[CandidateModel]
     disc_fits: list[DiscFit]
     sure: bool
+    #: The runner-up fits about as well (a BIC margin under FitOptions.sure_delta_bic_per_disc per disc).
+    close_runner_up: bool = False
     options: FitOptions = FitOptions()
     time_s: float = 0.0
     #: The aperture as the discs show it (``aperture`` turned back for near discs: 180°, −rim, ...).
@@ -784,7 +786,7 @@ def fit_aperture(
             switch = (f"with the {' and the '.join(added)} in the model, the {simplest.aperture.display_name} explains "
                       f"the discs better than the {winner.aperture.display_name} chosen without (ΔBIC {joint.bic - trial.bic:.0f})")
         elif (doubt := _unsupported(winner, [winner_fits[i] for i in kept])) is not None:
-            switch = f"not a {winner.aperture.display_name}: on all {len(kept)} discs fitted, {doubt}"
+            switch = f"a {winner.aperture.display_name} does not hold on all {len(kept)} discs fitted: {doubt}"
         elif shown < OUTLINE_SUPPORT_SHARE:
             switch = (f"the {winner.aperture.display_name} that the discs' pixels favour fits the outlines of only "
                       f"{round(shown * len(joint_discs))} of {len(joint_discs)} discs better than the "
@@ -825,7 +827,8 @@ def fit_aperture(
     runner_up_rss = (sum(item.fits[runner_up.family.name].rss for item in disc_fits[:selection_discs])
                      if runner_up is not None else math.inf)
     best_rss = sum(item.fits[winner.name].rss for item in disc_fits[:selection_discs])
-    sure = (margin >= options.sure_delta_bic_per_disc * selection_discs or runner_up_rss >= best_rss) and not notes
+    close = not (margin >= options.sure_delta_bic_per_disc * selection_discs or runner_up_rss >= best_rss)
+    sure = not close and not notes
     best_fits = [final[i] for i in kept]
     # The size from the discs that show their whole profile where there are any: a saturated
     # disc's edge pixels above the clip read as lower bounds, so its size is known to about a pixel.
@@ -873,6 +876,7 @@ def fit_aperture(
         candidates=models,
         disc_fits=used_fits,
         sure=sure,
+        close_runner_up=close,
         options=options,
         time_s=time.perf_counter() - start,
         seen_aperture=seen_aperture,
