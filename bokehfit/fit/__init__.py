@@ -341,9 +341,12 @@ def _choose_discs(discs: list[Disc], families: tuple[Family, ...], max_discs: in
     cut by a blade, two merged glows): the outline says so. The straight families suffice (a
     rounded polygon lies between its straight one and the circle) and keep the screen cheap."""
     pool = _order_for_fit(discs, CHOICE_POOL * max_discs)
-    regular = [_regular(screen(d.outline_xy, families, _slit_aspect(d), d.outline_reliable)) for d in pool]
-    order = sorted(range(len(pool)), key=lambda i: (pool[i].overlaps, not regular[i]))[:max_discs]
-    return [pool[i] for i in order]
+    groups: dict[tuple[bool, bool], list[Disc]] = {(False, True): [], (False, False): [], (True, True): [], (True, False): []}
+    for disc in pool:  # discs on their own come first: once max_discs of them are regular, the rest can wait
+        if len(groups[False, True]) >= max_discs:
+            break
+        groups[disc.overlaps, _regular(screen(disc.outline_xy, families, _slit_aspect(disc), disc.outline_reliable))].append(disc)
+    return [disc for group in groups.values() for disc in group][:max_discs]
 
 
 def _slit_aspect(disc: Disc) -> float:
