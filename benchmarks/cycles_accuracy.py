@@ -26,6 +26,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -33,6 +34,7 @@ import time
 from pathlib import Path
 
 from bokehfit.apertures import Aperture, make_aperture
+from bokehfit.fit.signature import misalignment_deg
 
 DATA = Path(__file__).resolve().parents[1] / "tests" / "data" / "cycles"
 TARGET_BLADES = 0.95
@@ -62,30 +64,30 @@ def compare(path: Path, render: dict, out: Path) -> dict:
 
 
 def score(render: dict, result: dict) -> dict:
-    aperture = result.get("aperture") or {}
-    shape, blades = aperture.get("shape"), aperture.get("blades")
+    """One render's row: the status, the fitted shape, and its errors against the truth, judged
+    through the aperture model (a round hole: the circle; blades: their count, the rotation
+    between the outlines whatever the shape's angle convention, the roundness, a circle being 1)."""
     row = {"status": result.get("status"), "fit": None, "blades_right": None, "angle_error_deg": None,
            "roundness_error": None, "vignetting": None, "rim": None, "seconds": round(result["seconds"], 1)}
     if "message" in result:
         row["status"] = f"{row['status']}: {result['message'].splitlines()[-1] if result['message'] else ''}"
-    if shape is None:
+    data = result.get("aperture") or {}
+    if data.get("shape") is None:
         return row
-    row["fit"] = f"ngon({blades})" if shape == "ngon" else shape
-    if render["shape"] == "circle":
-        row["blades_right"] = shape == "circle"
+    fitted = Aperture.from_json(data)
+    row["fit"] = fitted.label
+    if render["blades"] is None:  # a round hole
+        row["blades_right"] = fitted.is_circle
     else:
-        row["blades_right"] = blades == render["blades"]
+        row["blades_right"] = fitted.blades == render["blades"]
         if row["blades_right"]:
-            # The rotation between the outlines, whatever each shape's angle convention (a square's).
             truth = make_aperture("ngon", render["angle_deg"], blades=render["blades"], roundness=render["roundness"])
-            row["angle_error_deg"] = Aperture.from_json(aperture).misalignment_deg(truth)
-    roundness = 1.0 if shape == "circle" else aperture.get("roundness")
-    if roundness is not None:
-        row["roundness_error"] = abs(roundness - render["roundness"])
+            row["angle_error_deg"] = misalignment_deg(fitted, truth)
+    row["roundness_error"] = abs((1.0 if fitted.is_circle else fitted.roundness) - render["roundness"])
     if render["vignetting"] is not None:
-        row["vignetting"] = {"fitted": aperture.get("vignetting"), "true": render["vignetting"]}
+        row["vignetting"] = {"fitted": data.get("vignetting"), "true": render["vignetting"]}
     if render["rim"]:
-        row["rim"] = {"fitted": aperture.get("rim"), "true": render["rim"]}
+        row["rim"] = {"fitted": data.get("rim"), "true": render["rim"]}
     return row
 
 
@@ -107,12 +109,22 @@ def _fmt(value, digits=2) -> str:
     return str(value)
 
 
-def _median(values: list[float]) -> float | None:
-    values = sorted(values)
-    if not values:
-        return None
-    middle = len(values) // 2
-    return values[middle] if len(values) % 2 else 0.5 * (values[middle - 1] + values[middle])
+def summary(rows: list[dict]) -> dict:
+    """The figures of a set of scored rows: how many, blade counts right, sure answers that are
+    wrong, unsure or failed answers, and the median angle and roundness errors (None where none)."""
+    def median(values):
+        values = [v for v in values if v is not None]
+        return statistics.median(values) if values else None
+
+    return {
+        "files": len(rows),
+        "fitted_a_shape": sum(row["blades_right"] is not None for row in rows),
+        "blades_right": sum(bool(row["blades_right"]) for row in rows),
+        "sure_and_wrong": sum(row["status"] == "fitted" and row["blades_right"] is False for row in rows),
+        "not_sure": sum(row["status"] != "fitted" for row in rows),
+        "angle_error_deg": median(row["angle_error_deg"] for row in rows),
+        "roundness_error": median(row["roundness_error"] for row in rows),
+    }
 
 
 def main(argv=None) -> int:
@@ -132,7 +144,7 @@ def main(argv=None) -> int:
                 result = compare(data / entry["file"], render, Path(tmp) / f"{Path(entry['file']).stem}.json")
                 row = {"file": entry["file"], "truth": f"{render['shape']}"
                        + (f"({render['blades']}) r{render['roundness']:g} {render['angle_deg']:g}°"
-                          if render["shape"] == "ngon" else ""), **score(render, result)}
+                          if render["blades"] is not None else ""), **score(render, result)}
                 rows.append(row)
                 print(f"{row['file']:44s} {row['truth']:22s} {_fmt(row['status']):9s} fit {_fmt(row['fit']):12s} "
                       f"blades {_fmt(row['blades_right']):5s} angle err {_fmt(row['angle_error_deg'])}° "
@@ -140,15 +152,13 @@ def main(argv=None) -> int:
                       + (f" vignetting {_fmt(row['vignetting'])}" if row["vignetting"] else "")
                       + (f" rim {_fmt(row['rim'])}" if row["rim"] else "")
                       + f"  [{row['seconds']} s]", flush=True)
-    judged = [row for row in rows if row["blades_right"] is not None]
-    share = sum(bool(row["blades_right"]) for row in rows) / len(rows) if rows else math.nan
-    angle = _median([row["angle_error_deg"] for row in rows if row["angle_error_deg"] is not None])
-    roundness = _median([row["roundness_error"] for row in rows if row["roundness_error"] is not None])
+    figures = summary(rows)
+    share = figures["blades_right"] / figures["files"] if rows else math.nan
     print()
-    print(f"files {len(rows)}, fitted a shape {len(judged)}")
+    print(f"files {figures['files']}, fitted a shape {figures['fitted_a_shape']}")
     print(f"blade count right: {share:.0%} of files (target ≥ {TARGET_BLADES:.0%})")
-    print(f"median angle error: {_fmt(angle)}° (target ≤ {TARGET_ANGLE_DEG:g}°)")
-    print(f"median roundness error: {_fmt(roundness)} (target ≤ {TARGET_ROUNDNESS:g})")
+    print(f"median angle error: {_fmt(figures['angle_error_deg'])}° (target ≤ {TARGET_ANGLE_DEG:g}°)")
+    print(f"median roundness error: {_fmt(figures['roundness_error'])} (target ≤ {TARGET_ROUNDNESS:g})")
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1) + "\n")
     return 0

@@ -76,12 +76,9 @@ def main(argv=None) -> int:
     print("| mode | renders | blade count right | fitted and wrong | unsure, no_fit or no_discs | median angle error |")
     print("|---|---:|---:|---:|---:|---:|")
     for mode in args.modes:
-        mine = [row for row in rows if row["mode"] == mode]
-        right = sum(bool(row["blades_right"]) for row in mine)
-        wrong = sum(row["status"] == "fitted" and row["blades_right"] is False for row in mine)
-        honest = sum(row["status"] != "fitted" for row in mine)
-        angle = cycles_accuracy._median([row["angle_error_deg"] for row in mine if row["angle_error_deg"] is not None])
-        print(f"| {mode} | {len(mine)} | {right} | {wrong} | {honest} | {cycles_accuracy._fmt(angle)}° |")
+        f = cycles_accuracy.summary([row for row in rows if row["mode"] == mode])
+        print(f"| {mode} | {f['files']} | {f['blades_right']} | {f['sure_and_wrong']} | {f['not_sure']} | "
+              f"{cycles_accuracy._fmt(f['angle_error_deg'])}° |")
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1) + "\n")
     return 0

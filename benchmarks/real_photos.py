@@ -37,10 +37,11 @@ import time
 from collections import Counter
 from pathlib import Path
 
+from bokehfit.apertures import Aperture
+from bokehfit.fit import ROUND_ENOUGH  # blades this round count as round (the issue's bar)
+
 ROOT = Path(__file__).resolve().parents[1]
 MANIFEST = ROOT / "reference_photos" / "manifest.json"
-#: Least roundness of a rounded polygon that counts as round (the issue's bar).
-ROUND_ENOUGH = 0.8
 
 
 def find_photo(entry: dict) -> Path | None:
@@ -69,8 +70,7 @@ def answer(aperture: dict) -> str:
     """The answer in a few words (from the JSON only)."""
     if not aperture or aperture.get("shape") is None:
         return "none"
-    shape = aperture["shape"] if aperture["shape"] != "ngon" else f"ngon({aperture['blades']})"
-    words = [shape]
+    words = [Aperture.from_json(aperture).label]
     if aperture.get("aspect") is not None:
         words.append(f"aspect {aperture['aspect']:.2f}")
     if aperture.get("roundness"):

@@ -70,8 +70,7 @@ MIN_ACCEPTABLE_IOU = 0.6
 MIN_SURE_IOU = 0.85
 MIN_SURE_DISCS = 3
 #: ... and the discs' outlines follow the shape: median radial misfit (in equal-area radii) at most
-#: this (:data:`bokehfit.fit.REGULAR_OUTLINE_MISFIT`, the fit's "regular" outline).
-MAX_SURE_OUTLINE_MISFIT = REGULAR_OUTLINE_MISFIT
+#: :data:`bokehfit.fit.REGULAR_OUTLINE_MISFIT`, the fit's "regular" outline.
 #: The kernel is drawn at the fitted angle, so each disc's best alignment with
 #: it is searched within this many degrees.
 ALIGNMENT_SEARCH_DEG = 10.0
@@ -706,13 +705,12 @@ def compare_photo(
 def judge(fit: ApertureFit, metrics: dict[str, float | None]) -> tuple[list[str], str | None]:
     """Doubts about a fit, and the reason to reject it, from the evidence (stated thresholds)."""
     doubts = []
-    margin = fit.margin_bic
-    if fit.close_runner_up and not (margin is not None and margin < 0 and fit.notes):
+    if fit.close_runner_up:
         doubts.append(f"the runner-up ({fit.runner_up.family.aperture.display_name}) fits almost as well")
     doubts.extend(fit.notes)
-    if fit.outline_misfit > MAX_SURE_OUTLINE_MISFIT:
+    if fit.outline_misfit > REGULAR_OUTLINE_MISFIT:
         doubts.append(f"the discs' outlines are irregular (median misfit {fit.outline_misfit:.2f} of their radius to the "
-                      f"best shape, {MAX_SURE_OUTLINE_MISFIT} for a sure fit): blobs that say little about the aperture")
+                      f"best shape, {REGULAR_OUTLINE_MISFIT} for a sure fit): blobs that say little about the aperture")
     fitted = len(fit.disc_fits)
     if fitted < MIN_SURE_DISCS:
         doubts.append(f"only {fitted} disc{' was' if fitted == 1 else 's were'} clean enough to fit")

@@ -238,19 +238,21 @@ const ROUNDED_NGON_NEWTON_STEPS: u32 = 6u;
 // Below this roundness the rounded samplers use the straight polygon (ROUNDNESS_POLYGON).
 const ROUNDNESS_POLYGON: f32 = 1e-7;
 
-// x - sin(x) without cancellation: Taylor series (to x^15) for |x| < 1.
+// x - sin(x) without cancellation: Taylor series (to x^15, by Horner) for |x| < 1, the
+// coefficients 1/3!, -1/5!, ..., 1/15! of _SERIES in samplers.py.
 fn x_minus_sin(x: f32) -> f32 {
     if (abs(x) >= 1.0) {
         return x - sin(x);
     }
     let x2 = x * x;
-    var term = x * x2 / 6.0;
-    var sum = 0.0;
-    for (var k = 0u; k < 7u; k++) {
-        sum += term;
-        term = -term * x2 / f32((2u * k + 4u) * (2u * k + 5u));
-    }
-    return sum;
+    var series = 1.0 / 1307674368000.0;
+    series = series * x2 - 1.0 / 6227020800.0;
+    series = series * x2 + 1.0 / 39916800.0;
+    series = series * x2 - 1.0 / 362880.0;
+    series = series * x2 + 1.0 / 5040.0;
+    series = series * x2 - 1.0 / 120.0;
+    series = series * x2 + 1.0 / 6.0;
+    return x * x2 * series;
 }
 
 // Half angle of each blade arc, asin(roundness sin(pi/n)). Lavapipe's asin is off by ~1e-4

@@ -28,6 +28,7 @@ from bokehfit.discs import find_discs
 from bokehfit.errors import InputError
 from bokehfit.fit import FitFailedError, fit_aperture
 from bokehfit.fit.pixels import crop_disc
+from bokehfit.fit.signature import misalignment_deg
 from bokehfit.io import load_photo
 from bokehfit.metrics import angle_error
 from bokehfit.synthetic import SyntheticDisc, encode_srgb8, render_discs
@@ -363,3 +364,18 @@ def test_near_discs_show_the_aperture_turned_by_180(shape, angle):
     assert angle_error(near.candidates[0].angle_deg, seen_expected, symmetry) < ANGLE_TOL_DEG  # the same discs
     assert angle_error(near.aperture.angle_deg, angle, symmetry) < ANGLE_TOL_DEG
     assert near.aperture.canonical_angle_deg == pytest.approx(angle, abs=ANGLE_TOL_DEG)
+
+
+@pytest.mark.parametrize(("a", "b", "expected"), [
+    # The square is the 4-gon turned by 45° (design.md §3): the same outline, 0° apart.
+    (make_aperture("square", 20.0), make_aperture("ngon", 65.0, blades=4), 0.0),
+    (make_aperture("square", 20.0), make_aperture("ngon", 65.4, blades=4, roundness=0.3), 0.4),
+    # Folded by the symmetry: 59.9° and 0.1° hexagons are 0.2° apart.
+    (make_aperture("hexagon", 59.9), make_aperture("hexagon", 0.1), 0.2),
+    (make_aperture("ngon", 3.0, blades=9, roundness=0.3), make_aperture("ngon", 40.5, blades=9, roundness=0.3), 2.5),
+    # A triangle turned by 180° (a light on the other side of focus) is 60° off, the most there is.
+    (make_aperture("triangle", 5.0), make_aperture("triangle", 185.0), 60.0),
+    (make_aperture("circle"), make_aperture("triangle", 65.0), 0.0),
+])
+def test_misalignment_is_the_rotation_between_outlines_whatever_the_convention(a, b, expected):
+    assert misalignment_deg(a, b) == pytest.approx(expected, abs=0.02)

@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 
 from bokehfit.compare import compare_photo
+from bokehfit.fit import ROUND_ENOUGH
 
 MANIFEST = json.loads((Path(__file__).resolve().parents[1] / "reference_photos" / "manifest.json").read_text(encoding="utf-8"))
 LABELS = {entry["file"]: entry["label"] for entry in MANIFEST["photos"]}
@@ -17,10 +18,10 @@ LABELS = {entry["file"]: entry["label"] for entry in MANIFEST["photos"]}
 def test_round_discs_fit_round(reference_photo, gpu, name):
     comparison = compare_photo(reference_photo(name))
     assert comparison.fit and comparison.acceptable
-    # Round: the circle, or blades so rounded that they are nearly one (the bar: roundness ≥ 0.8).
+    # Round: the circle, or blades so rounded that they are nearly one (the bar: roundness ≥ ROUND_ENOUGH, 0.8).
     aperture = comparison.fit.aperture
     assert aperture.aspect is None
-    assert aperture.is_circle or aperture.roundness >= 0.8, comparison.fit.message
+    assert aperture.is_circle or aperture.roundness >= ROUND_ENOUGH, comparison.fit.message
     if comparison.status == "fitted":
         assert aperture.is_circle, "a sure answer on round discs is the circle"
 
@@ -54,7 +55,7 @@ def test_a_fitted_answer_is_never_wrong(reference_photo, gpu, name):
         return
     assert aperture.aspect is None, comparison.fit.message
     if label["round"]:
-        assert aperture.is_circle or aperture.roundness >= 0.8, comparison.fit.message
+        assert aperture.is_circle or aperture.roundness >= ROUND_ENOUGH, comparison.fit.message
     if label.get("rim") == "positive":
         assert aperture.rim > 0, f"a sure answer without the bright rim the discs show: {comparison.fit.message}"
 
@@ -66,7 +67,7 @@ def test_09_round_discs_cut_at_the_edges_are_round_with_vignetting(reference_pho
     comparison = compare_photo(reference_photo("09_soap-bubbles_cat-eye.jpg"))
     assert comparison.fit, comparison.reason
     aperture = comparison.fit.aperture
-    assert aperture.is_circle or aperture.roundness >= 0.8, comparison.fit.message
+    assert aperture.is_circle or aperture.roundness >= ROUND_ENOUGH, comparison.fit.message
     assert aperture.vignetting is not None, comparison.fit.message
     # The verdict says what set the triangle aside, and does not call it a close runner-up.
     assert comparison.status == "unsure" and "the pixels alone favour a rounded triangle" in comparison.verdict

@@ -366,18 +366,3 @@ def test_coverage_flip_differs_for_odd_symmetry():
     # For a triangle the 180° turn is a different kernel: the flip test above can fail.
     aperture = make_aperture("triangle", 20.0)
     assert np.abs(coverage(aperture, 5.9, 15, flip=True) - coverage(aperture, 5.9, 15)).max() > 0.1
-
-
-@pytest.mark.parametrize(("a", "b", "expected"), [
-    # The square is the 4-gon turned by 45° (design.md §3): the same outline, 0° apart.
-    (make_aperture("square", 20.0), make_aperture("ngon", 65.0, blades=4), 0.0),
-    (make_aperture("square", 20.0), make_aperture("ngon", 65.4, blades=4, roundness=0.3), 0.4),
-    # Folded by the symmetry: 59.9° and 0.1° hexagons are 0.2° apart.
-    (make_aperture("hexagon", 59.9), make_aperture("hexagon", 0.1), 0.2),
-    (make_aperture("ngon", 3.0, blades=9, roundness=0.3), make_aperture("ngon", 40.5, blades=9, roundness=0.3), 2.5),
-    # A triangle turned by 180° (a light on the other side of focus) is 60° off, the most there is.
-    (make_aperture("triangle", 5.0), make_aperture("triangle", 185.0), 60.0),
-    (make_aperture("circle"), make_aperture("triangle", 65.0), 0.0),
-])
-def test_misalignment_is_the_rotation_between_outlines_whatever_the_convention(a, b, expected):
-    assert a.misalignment_deg(b) == pytest.approx(expected, abs=0.02)

@@ -286,7 +286,8 @@ ROUNDNESS_POLYGON = 1e-7
 _SERIES_BELOW = 1.0
 
 
-#: The series' coefficients: x − sin x = x³ (1/3! − x²/5! + x⁴/7! − … + x¹²/15!).
+#: The series' coefficients: x − sin x = x³ (1/3! − x²/5! + x⁴/7! − … + x¹²/15!) (the WGSL twin
+#: writes them out, in the same Horner order).
 _SERIES = tuple((-1) ** k / math.factorial(2 * k + 3) for k in range(7))
 
 

@@ -528,32 +528,6 @@ class Aperture:
         normal = np.stack([b[..., 1] - a[..., 1], a[..., 0] - b[..., 0]], axis=-1)
         return np.sum(p * normal, axis=-1) / np.sum(a * normal, axis=-1)
 
-    def misalignment_deg(self, other: Aperture, samples: int = 3600) -> float:
-        """The least rotation (degrees) that lays this outline best onto ``other``'s, whatever angle
-        convention each shape has (the square is the 4-gon turned by 45°, design.md §3): 0 for the
-        same shape at the same angle; 0 where this aperture has no angle (the circle).
-
-        The outlines' radius functions at their angles are cross-correlated over ``samples``
-        directions, the peak refined by a parabola; the shift is folded by this aperture's symmetry.
-
-        Examples
-        --------
-        >>> round(make_aperture("square", 20.0).misalignment_deg(make_aperture("ngon", 65.3, blades=4)), 2)
-        0.3
-        """
-        period = self.symmetry_deg
-        if not self.has_angle or period is None:
-            return 0.0
-        theta = np.linspace(0.0, 2.0 * math.pi, samples, endpoint=False)
-        mine = self.outline_radius(theta - math.radians(self.angle_deg))
-        theirs = other.outline_radius(theta - math.radians(other.angle_deg if other.has_angle else 0.0))
-        correlation = np.fft.irfft(np.fft.rfft(theirs) * np.conj(np.fft.rfft(mine)), samples)
-        k = int(np.argmax(correlation))
-        left, centre, right = correlation[k - 1], correlation[k], correlation[(k + 1) % samples]
-        curvature = left - 2.0 * centre + right
-        shift = (k + (0.5 * (left - right) / curvature if curvature < 0 else 0.0)) * 360.0 / samples % period
-        return float(min(shift, period - shift))
-
     def outline_radius(self, theta: np.ndarray) -> np.ndarray:
         """Distance from the centre to the outline at angle 0 (unit area) in the directions ``theta`` (radians).
 

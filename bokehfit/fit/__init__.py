@@ -147,7 +147,8 @@ class ApertureFit:
     candidates: list[CandidateModel]
     disc_fits: list[DiscFit]
     sure: bool
-    #: The runner-up fits about as well (a BIC margin under FitOptions.sure_delta_bic_per_disc per disc).
+    #: The runner-up fits about as well (a BIC margin under FitOptions.sure_delta_bic_per_disc per disc),
+    #: and was not set aside by a note.
     close_runner_up: bool = False
     options: FitOptions = FitOptions()
     time_s: float = 0.0
@@ -813,7 +814,7 @@ def fit_aperture(
     if winner_model.angle_deg is not None:  # every disc shares the joint aperture: its angle, not a mean of copies
         winner_model = dataclasses.replace(winner_model, angle_deg=joint.aperture.canonical_angle_deg)
     if seen_aperture.vignetting is not None:  # the outlines against the cut each disc shows, not the whole shape
-        misfits = [outline_misfit(disc_fits[i].disc.outline_xy, seen_aperture, final[i].field_position) for i in kept]
+        misfits = _misfits([disc_fits[i].disc for i in kept], seen_aperture, [final[i] for i in kept])
         winner_model = dataclasses.replace(winner_model, screen_rms=float(np.median(misfits)))
     models = [
         dataclasses.replace(winner_model if m.family is winner else m, bic=m.bic, delta_bic=m.bic - best_bic)
@@ -830,8 +831,11 @@ def fit_aperture(
     runner_up_rss = (sum(item.fits[runner_up.family.name].rss for item in disc_fits[:selection_discs])
                      if runner_up is not None else math.inf)
     best_rss = sum(item.fits[winner.name].rss for item in disc_fits[:selection_discs])
-    close = not (margin >= options.sure_delta_bic_per_disc * selection_discs or runner_up_rss >= best_rss)
-    sure = not close and not notes
+    clear = margin >= options.sure_delta_bic_per_disc * selection_discs or runner_up_rss >= best_rss
+    sure = clear and not notes
+    # A runner-up the pixels rank above the winner was set aside by the consensus or the outlines
+    # (a note says why): it is not a close runner-up.
+    close = not clear and (margin >= 0 or not notes)
     best_fits = [final[i] for i in kept]
     # The size from the discs that show their whole profile where there are any: a saturated
     # disc's edge pixels above the clip read as lower bounds, so its size is known to about a pixel.

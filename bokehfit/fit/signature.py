@@ -17,14 +17,16 @@ for the pixel fit, and gives the fit its starting angle.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from bokehfit.apertures import Aperture, image_to_aperture
 from bokehfit.fit.families import Family
+from bokehfit.metrics import angle_error
 
-__all__ = ["SAMPLES", "Screen", "outline_misfit", "radial_signature", "screen"]
+__all__ = ["SAMPLES", "Screen", "misalignment_deg", "outline_misfit", "radial_signature", "screen"]
 
 #: Angles of the radial signature (0.5° apart).
 SAMPLES = 720
@@ -114,6 +116,27 @@ def outline_misfit(outline_xy: np.ndarray, aperture: Aperture, field_position=No
     t = np.linspace(0.0, along[-1], 4 * SAMPLES, endpoint=False)
     dense = np.column_stack([np.interp(t, along, closed[:, 0]), np.interp(t, along, closed[:, 1])])
     return _best_shift(observed, _signature(dense))[1]
+
+
+def misalignment_deg(aperture: Aperture, other: Aperture) -> float:
+    """The least rotation (degrees) between ``aperture``'s outline and ``other``'s, whatever angle
+    convention each shape has (the square is the 4-gon turned by 45°, design.md §3): the rotation
+    that best lays their outlines at angle 0 on each other (:func:`_best_shift`), with their
+    angles, folded by ``aperture``'s symmetry (:func:`bokehfit.metrics.angle_error`); 0 where
+    ``aperture`` has no angle (the circle). For apertures without a squeeze.
+
+    Examples
+    --------
+    >>> from bokehfit.apertures import make_aperture
+    >>> round(misalignment_deg(make_aperture("square", 20.0), make_aperture("ngon", 65.3, blades=4)), 2)
+    0.3
+    """
+    if not aperture.has_angle:
+        return 0.0
+    # other's outline at 0 ≈ aperture's at 0 turned by ``zero``: aperture at α lies on other at β where α = β + zero.
+    zero = math.degrees(_best_shift(_model_signature(other), _model_signature(aperture))[0])
+    other_angle = other.angle_deg if other.has_angle else 0.0
+    return angle_error(aperture.angle_deg - other_angle - zero, 0.0, aperture.symmetry_deg)
 
 
 def _best_shift(observed: np.ndarray, model: np.ndarray, weights: np.ndarray | None = None) -> tuple[float, float]:
