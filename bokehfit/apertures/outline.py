@@ -140,7 +140,16 @@ class Outline:
         return self.polylines(max_error)[0]
 
     def transformed(self, matrix: np.ndarray) -> Outline:
-        return Outline(tuple(tuple(piece.transformed(matrix) for piece in loop) for loop in self.loops))
+        """The outline mapped by the 2×2 ``matrix`` (a loop of straight edges all at once)."""
+        matrix = np.asarray(matrix, dtype=np.float64)
+        loops = []
+        for loop in self.loops:
+            if all(isinstance(piece, Segment) for piece in loop):
+                ends = np.array([(piece.start, piece.end) for piece in loop], dtype=np.float64) @ matrix.T
+                loops.append(tuple(Segment(tuple(a), tuple(b)) for a, b in ends.tolist()))
+            else:
+                loops.append(tuple(piece.transformed(matrix) for piece in loop))
+        return Outline(tuple(loops))
 
 
 def _crossings(piece: Piece, centre: np.ndarray, radius: float) -> list[float]:

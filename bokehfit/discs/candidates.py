@@ -3,9 +3,20 @@
 Notes
 -----
 Disc diameters are split into octave bands [s, 2s) with s = 4, 8, 16, … px.
-Band s is searched on a copy reduced by ``f = max(1, s / BAND_SIDE_PX)``
-(area averaging), so its discs are 6 to 12 px across there whatever their size,
-and every band costs about the same. On that copy:
+Band s is searched on a copy reduced by ``f = s / BAND_SIDE_PX`` (area averaging),
+so its discs are 6 to 12 px across there whatever their size, and every band
+costs about the same. A band whose f would lie between 1 and 2 is searched on
+the photo halved (f = 2, discs from ``MIN_COPY_SIDE_PX`` = 4 px there) where its
+discs are 8 px or more, else on the photo itself: the first band of ``compare``
+(8–16 px) is the costliest search, and a reduction by 4/3 costs a resampling of
+the whole photo and leaves a copy half again as large as the half-size one,
+for discs that the half-size copy still shows as blobs of 12 pixels or more
+(each candidate is then measured at full resolution). The photo is halved once
+(2 × 2 means); each band's copy is area-averaged from the smallest copy before
+it at least ``COPY_SOURCE_RATIO`` times finer, else from the half (OpenCV's
+area resampling of a large image into a very small one is slow: it works a
+few output rows per thread).
+On that copy:
 
 - the background is a grey-scale morphological opening with a square wider
   than the band's largest disc (a square that fits inside no disc of the band
@@ -35,8 +46,8 @@ strip first, and the blobs are labelled per strip and joined where they run
 across a border (8-connected, as in one piece). Only the blobs with a pixel at
 the least peak a candidate needs are kept, as lists of their pixels; their
 figures (centroids as sums of whole numbers over the area) are those of labelling
-the copy in one piece. Candidates come out in raster order of their first pixel.
-Bands searched on a reduced copy go first, the largest copy first.
+the copy in one piece. Candidates come out band by band from the smallest, each
+band's in raster order of their first pixel.
 """
 
 from __future__ import annotations
@@ -82,6 +93,10 @@ BACKGROUND_REACH = 2.0
 BACKGROUND_REACH_LARGE = 1.3
 #: Smallest disc of a band, in pixels of the reduced copy it is searched on.
 BAND_SIDE_PX = 6.0
+#: Smallest disc of a band whose copy would be reduced by less than 2: it is searched on the
+#: photo halved instead (discs from this size there), where that keeps them this large.
+MIN_COPY_SIDE_PX = 4.0
+COPY_SOURCE_RATIO = 8.0
 #: A low-threshold blob this many times larger than its largest half-peak region is also a
 #: cluster candidate (a disc's blur and glow make its blob up to about 2 times larger).
 CLUSTER_AREA_RATIO = 2.0
@@ -286,14 +301,8 @@ def _band_blobs(image, element, whole, sigma) -> tuple[_Blobs, _Blobs, np.ndarra
     return blobs, _describe(region, count, flat, residual, background, width), owner
 
 
-def _band_candidates(luminance: np.ndarray, band: float, min_diameter: float) -> list[Candidate]:
-    height, width = luminance.shape
-    factor = max(1.0, band / BAND_SIDE_PX)
-    if factor > 1.0:
-        size = (max(1, round(width / factor)), max(1, round(height / factor)))
-        image = cv2.resize(luminance, size, interpolation=cv2.INTER_AREA)
-    else:
-        image = luminance
+def _band_candidates(image: np.ndarray, factor: float, band: float, min_diameter: float) -> list[Candidate]:
+    """The candidates of band ``band``, searched on ``image``, the photo reduced by ``factor``."""
     reach = BACKGROUND_REACH_LARGE if 2.0 * band >= LARGE_DISC_PX else BACKGROUND_REACH
     side = 2 * math.ceil(reach * band / factor) + 3
     element = cv2.getStructuringElement(cv2.MORPH_RECT, (side, side))
@@ -334,18 +343,40 @@ def _cluster_blobs(blobs: _Blobs, regions: _Blobs, owner: np.ndarray, sigma, fac
 def find_candidates(luminance: np.ndarray, min_diameter_px: float, max_diameter_px: float) -> list[Candidate]:
     """Candidates of every octave band from ``min_diameter_px`` to ``max_diameter_px``, band by band.
 
-    The bands searched on a reduced copy go first, the largest copy first, and the bands
-    searched on the image itself last: the largest copy then does not come on top of the
-    memory that searching the whole image leaves with the allocator.
+    The bands go from the smallest up. Each band's reduced copy is made from the copy
+    before it (a pyramid: the photo itself is area-averaged once, every later copy is half
+    the one before), so the reductions cost about a third of the first one in all.
     """
-    bands = []
+    height, width = luminance.shape
+    found = []
+    copies: list[tuple[float, np.ndarray]] = []  # (factor, copy), finest first: the photo halved, then the bands'
     band = min_diameter_px
     while band < max_diameter_px:
-        bands.append(band)
+        factor = _reduction(band)
+        image = luminance
+        if factor > 1.0:
+            if not copies:
+                size = (max(1, round(width / 2)), max(1, round(height / 2)))
+                copies.append((2.0, cv2.resize(luminance, size, interpolation=cv2.INTER_AREA)))
+            # The source: the smallest copy at least COPY_SOURCE_RATIO times finer (else the half);
+            # the finer ones before it are no band's source any more.
+            source = max(0, sum(f * COPY_SOURCE_RATIO <= factor for f, _ in copies) - 1)
+            del copies[:source]
+            image = copies[0][1]
+            if factor != copies[0][0]:
+                size = (max(1, round(width / factor)), max(1, round(height / factor)))
+                image = cv2.resize(image, size, interpolation=cv2.INTER_AREA)
+                copies.append((factor, image))
+        found += _band_candidates(image, factor, band, min_diameter_px)
         band *= 2.0
-    found = {band: _band_candidates(luminance, band, min_diameter_px) for band in sorted(bands, key=_search_order)}
-    return [candidate for band in bands for candidate in found[band]]
+    return found
 
 
-def _search_order(band: float) -> tuple[bool, float]:
-    return band <= BAND_SIDE_PX, band
+def _reduction(band: float) -> float:
+    """The factor by which band ``band``'s copy is reduced (module notes): ``band / BAND_SIDE_PX``,
+    but 2 in place of a factor between 1 and 2 where the band's discs are ``MIN_COPY_SIDE_PX`` or
+    more there, else 1."""
+    factor = band / BAND_SIDE_PX
+    if factor >= 2.0:
+        return factor
+    return 2.0 if band >= 2.0 * MIN_COPY_SIDE_PX else 1.0

@@ -335,18 +335,19 @@ def _regular(screens: list[Screen]) -> bool:
     return min(misfits) <= REGULAR_OUTLINE_MISFIT
 
 
-def _choose_discs(discs: list[Disc], families: tuple[Family, ...], max_discs: int) -> list[Disc]:
+def _choose_discs(discs: list[Disc], families: tuple[Family, ...], max_discs: int, models: dict) -> list[Disc]:
     """The discs fitted: from the CHOICE_POOL · ``max_discs`` clearest (:func:`_order_for_fit`),
     those whose outline one of ``families`` explains (:func:`_regular`) first, each group in that
     order. Among real photos' discs the clearest are often not discs at all (a lit leaf, a disc
     cut by a blade, two merged glows): the outline says so. The straight families suffice (a
-    rounded polygon lies between its straight one and the circle) and keep the screen cheap."""
+    rounded polygon lies between its straight one and the circle) and keep the screen cheap.
+    ``models`` is the fit's memo of model signatures (:func:`~bokehfit.fit.signature.screen`)."""
     pool = _order_for_fit(discs, CHOICE_POOL * max_discs)
     groups: dict[tuple[bool, bool], list[Disc]] = {(False, True): [], (False, False): [], (True, True): [], (True, False): []}
     for disc in pool:  # discs on their own come first: once max_discs of them are regular, the rest can wait
         if len(groups[False, True]) >= max_discs:
             break
-        groups[disc.overlaps, _regular(screen(disc.outline_xy, families, _slit_aspect(disc), disc.outline_reliable))].append(disc)
+        groups[disc.overlaps, _regular(screen(disc.outline_xy, families, _slit_aspect(disc), disc.outline_reliable, models))].append(disc)
     return [disc for group in groups.values() for disc in group][:max_discs]
 
 
@@ -663,7 +664,8 @@ def fit_aperture(
     if clipped is not None and np.shape(clipped) != np.shape(luminance):
         raise InputError(f"clipped must have the luminance's shape {np.shape(luminance)} (got {np.shape(clipped)})")
     families = families_for(shapes)
-    chosen = _choose_discs(discs, families, options.max_discs)
+    models: dict = {}  # the model signatures of the screens, made once for all discs
+    chosen = _choose_discs(discs, families, options.max_discs, models)
     if not chosen:
         flagged = {
             "cut by the frame": sum(d.clipped for d in discs),
@@ -679,7 +681,7 @@ def fit_aperture(
     # rounded 7-gon looks more like a 12-gon than a 7-gon to a straight-only screen.
     rounded_of = {f: f.rounded for f in families if f.rounded is not None}
     screen_families = (*families, *rounded_of.values())
-    screened = [screen(d.outline_xy, screen_families, _slit_aspect(d), d.outline_reliable) for d in chosen]
+    screened = [screen(d.outline_xy, screen_families, _slit_aspect(d), d.outline_reliable, models) for d in chosen]
     screens_of = [{s.family: s for s in disc_screens} for disc_screens in screened]
     mean_rms = {f: np.mean([found[f].rms for found in screens_of]) for f in screen_families}
     best_rms = {f: min(mean_rms[f], mean_rms[rounded_of[f]]) if f in rounded_of else mean_rms[f] for f in families}

@@ -107,6 +107,9 @@ FIT_BOUNDS = {"aspect": (0.01, MAX_SLIT_ASPECT), "vignetting_radius": (1.0, 4.0)
 RELATIVE_PARAMETERS = ("aspect", "squeeze")
 #: Sub-pixels a side for the rim profile in the fit (the edge blur hides finer detail).
 RIM_FIT_SUPERSAMPLE = 3
+#: Bytes of coverages a fit keeps for its next steps (:func:`disc_profile`'s ``covers``): a
+#: Jacobian's blur column comes a few steps after the point it is taken at.
+COVERS_BYTES = 32 << 20
 #: A saturated disc's plateau is searched up to this many times the clip level.
 MAX_PLATEAU_OVER_CLIP = 50.0
 
@@ -298,20 +301,36 @@ class PixelFit:
 
 
 def disc_profile(
-    aperture: Aperture, disc: Mapping[str, float], size: int, field_position: Sequence[float] | None = None
+    aperture: Aperture,
+    disc: Mapping[str, float],
+    size: int,
+    field_position: Sequence[float] | None = None,
+    covers: dict | None = None,
 ) -> np.ndarray:
     """The blurred unit-contrast disc (size × size) of ``aperture``; ``disc`` holds the :data:`DISC_NAMES`
-    in crop units, the centre in crop pixel coordinates. ``field_position`` places a vignetted aperture."""
+    in crop units, the centre in crop pixel coordinates. ``field_position`` places a vignetted aperture.
+
+    ``covers``, where given, is the caller's memo of the unblurred coverages by their geometry
+    (aperture, size, centre, diameter, field position): a fit's steps that change only the blur
+    or the levels (a Jacobian's blur column, a plateau's) reuse the coverage instead of
+    integrating it again. It keeps the latest, about ``COVERS_BYTES`` in all."""
     centre = (size - 1) / 2.0
-    scale = max(disc["diameter_px"], 1e-3) * math.sqrt(math.pi) / 2.0
-    (offset_xy,) = image_to_aperture([[disc["cy"] - centre, disc["cx"] - centre]])
     where = None if aperture.vignetting is None else field_position
-    if aperture.rim != 0.0:
-        cover, _ = rim_coverage(aperture, scale, size, field_position=where, supersample=RIM_FIT_SUPERSAMPLE,
-                                max_chord_error=1e-4, offset_xy=tuple(offset_xy))
-    else:
-        cover = coverage(aperture, scale, size, offset_xy=tuple(offset_xy), field_position=where)
-    cover = cover.astype(np.float32)
+    key = (aperture, size, disc["cx"], disc["cy"], disc["diameter_px"], None if where is None else tuple(where))
+    cover = None if covers is None else covers.get(key)
+    if cover is None:
+        scale = max(disc["diameter_px"], 1e-3) * math.sqrt(math.pi) / 2.0
+        (offset_xy,) = image_to_aperture([[disc["cy"] - centre, disc["cx"] - centre]])
+        if aperture.rim != 0.0:
+            cover, _ = rim_coverage(aperture, scale, size, field_position=where, supersample=RIM_FIT_SUPERSAMPLE,
+                                    max_chord_error=1e-4, offset_xy=tuple(offset_xy))
+        else:
+            cover = coverage(aperture, scale, size, offset_xy=tuple(offset_xy), field_position=where)
+        cover = cover.astype(np.float32)
+        if covers is not None:
+            covers[key] = cover
+            while len(covers) * cover.nbytes > COVERS_BYTES and len(covers) > 1:
+                del covers[next(iter(covers))]  # the oldest
     return cv2.GaussianBlur(cover, (0, 0), max(disc["blur_px"], BLUR_RANGE[0]), borderType=cv2.BORDER_REPLICATE)
 
 
@@ -357,14 +376,15 @@ def render_disc_model(
     field_position: Sequence[float] | None = None,
     censored: np.ndarray | None = None,
     ignored: np.ndarray | None = None,
+    covers: dict | None = None,
 ) -> tuple[np.ndarray, float, float]:
     """Model crop (flattened) with its levels for ``data``: (model, background, plateau).
 
     The levels are solved for (least squares over the pixels neither censored nor ignored);
     a ``disc`` that holds ``"plateau"`` (a saturated disc) fixes the plateau
-    and only the background is solved for.
+    and only the background is solved for. ``covers``: see :func:`disc_profile`.
     """
-    profile = disc_profile(aperture, disc, size, field_position).ravel().astype(np.float64)
+    profile = disc_profile(aperture, disc, size, field_position, covers).ravel().astype(np.float64)
     seen = slice(None)
     if censored is not None or ignored is not None:
         seen = ~(_or(censored, ignored))
@@ -480,12 +500,14 @@ def fit_discs(
         discs = [dict(zip(names, (float(v) for v in vector[at : at + len(names)]))) for at, names in blocks]
         return aperture, discs
 
+    covers: dict = {}  # the coverages of the last steps (disc_profile)
+
     def residuals(vector):
         aperture, discs = split(vector)
         turned = aperture.near() if any(c.turned for c in crops) else aperture
         parts = [
             _residuals(render_disc_model(turned if c.turned else aperture, d, c.size, c.data, c.field_position,
-                                         c.censored, c.ignored)[0], c) / s
+                                         c.censored, c.ignored, covers)[0], c) / s
             for c, d, s in zip(crops, discs, noise)
         ]
         return np.concatenate(parts)

@@ -139,21 +139,23 @@ def misalignment_deg(aperture: Aperture, other: Aperture) -> float:
     return angle_error(aperture.angle_deg - other_angle - zero, 0.0, aperture.symmetry_deg)
 
 
-def _best_shift(observed: np.ndarray, model: np.ndarray, weights: np.ndarray | None = None) -> tuple[float, float]:
+def _best_shift(observed: np.ndarray, model: np.ndarray, weights: np.ndarray | None = None,
+                spectra: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[float, float]:
     """Rotation (radians) of the model that best fits, and the RMS difference there.
 
     With ``weights`` (1 where the outline is seen, 0 elsewhere) only the seen angles count, and
     the model's scale k is free: the cost over shifts s, Σw·o² − (Σw·o·mₛ)² / Σw·mₛ², is made of
-    circular correlations.
+    circular correlations. ``spectra`` are the model's :func:`_model_spectra`, where the caller
+    has them already.
     """
+    spectrum, squares = _model_spectra(model) if spectra is None else spectra
     if weights is not None:
-        spectrum = np.conj(np.fft.rfft(model))
         cross = np.fft.irfft(np.fft.rfft(weights * observed) * spectrum, SAMPLES)
-        power = np.fft.irfft(np.fft.rfft(weights) * np.conj(np.fft.rfft(model * model)), SAMPLES)
+        power = np.fft.irfft(np.fft.rfft(weights) * squares, SAMPLES)
         cost = np.sum(weights * observed**2) - cross**2 / np.maximum(power, 1e-12)
         k = int(np.argmin(cost))
         return k * 2 * np.pi / SAMPLES, float(np.sqrt(max(cost[k], 0.0) / max(weights.sum(), 1.0)))
-    correlation = np.fft.irfft(np.fft.rfft(observed) * np.conj(np.fft.rfft(model)), SAMPLES)
+    correlation = np.fft.irfft(np.fft.rfft(observed) * spectrum, SAMPLES)
     k = int(np.argmax(correlation))
     left, centre, right = correlation[k - 1], correlation[k], correlation[(k + 1) % SAMPLES]
     curvature = left - 2 * centre + right
@@ -163,19 +165,28 @@ def _best_shift(observed: np.ndarray, model: np.ndarray, weights: np.ndarray | N
     return shift, float(np.sqrt(np.mean(residual * residual)))
 
 
+def _model_spectra(model: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The conjugate spectra of a model signature and of its square (the correlations' factors)."""
+    return np.conj(np.fft.rfft(model)), np.conj(np.fft.rfft(model * model))
+
+
 def screen(outline_xy: np.ndarray, families: tuple[Family, ...], slit_aspect: float | None,
-           reliable: np.ndarray | None = None) -> list[Screen]:
+           reliable: np.ndarray | None = None, models: dict | None = None) -> list[Screen]:
     """Every family's best angle and RMS misfit for one outline, best first.
 
     ``slit_aspect`` (the outline's, None for none) is given to the families
     that have an ``aspect`` parameter; a family whose aperture varies its
     ``roundness`` is tried at each of :data:`ROUNDNESS_GRID` and keeps the best.
     ``reliable`` (per outline point) limits the score to the outline's own points.
+    ``models``, where given, is the caller's dict of the model apertures' signatures
+    and spectra, filled as they are first needed: one fit screens many outlines
+    against the same models.
     """
     if reliable is None or np.all(reliable) or np.sum(reliable) < 8:
         observed, weights = radial_signature(outline_xy), None
     else:
         observed, weights = partial_signature(outline_xy, reliable)
+    models = {} if models is None else models
     results = []
     for family in families:
         aperture = family.at(aspect=slit_aspect) if slit_aspect is not None else family.aperture
@@ -184,7 +195,11 @@ def screen(outline_xy: np.ndarray, families: tuple[Family, ...], slit_aspect: fl
             tries = [aperture.replace(roundness=r) for r in ROUNDNESS_GRID]
         best = None
         for model in tries:
-            shift, rms = _best_shift(observed, _model_signature(model), weights)
+            if model not in models:
+                signature = _model_signature(model)
+                models[model] = (signature, _model_spectra(signature))
+            signature, spectra = models[model]
+            shift, rms = _best_shift(observed, signature, weights, spectra)
             if best is None or rms < best[2]:
                 best = (model, shift, rms)
         model, shift, rms = best

@@ -61,31 +61,6 @@ class _Piece:
     crossing: Callable[[np.ndarray], np.ndarray]  #: x* where f crosses Y, clamped to the piece
 
 
-def _line_pieces(vertices: np.ndarray, closed: bool = True) -> list[_Piece]:
-    """Straight pieces between consecutive vertices (and from the last back to the first if ``closed``)."""
-    pieces = []
-    ends = np.roll(vertices, -1, axis=0) if closed else vertices[1:]
-    for (xa, ya), (xb, yb) in zip(vertices, ends):
-        if xa == xb:
-            continue  # vertical edges add no area under the curve
-        (x0, y0), (x1, y1) = ((xa, ya), (xb, yb)) if xa < xb else ((xb, yb), (xa, ya))
-        slope = (y1 - y0) / (x1 - x0)
-        pieces.append(
-            _Piece(
-                x_min=x0,
-                x_max=x1,
-                sign=1.0 if xa < xb else -1.0,
-                increasing=slope >= 0.0,
-                antiderivative=lambda x, x0=x0, y0=y0, m=slope: y0 * (x - x0) + 0.5 * m * (x - x0) ** 2,
-                # A horizontal edge lies below Y everywhere (x* = x1) or nowhere (x* = x0).
-                crossing=(lambda y, x0=x0, x1=x1, y0=y0: np.where(y > y0, x1, x0))
-                if slope == 0.0
-                else (lambda y, x0=x0, x1=x1, y0=y0, m=slope: np.clip(x0 + (y - y0) / m, x0, x1)),
-            )
-        )
-    return pieces
-
-
 def _elliptic_pieces(arc: Arc) -> list[_Piece]:
     """The arc split at its ellipse's quadrant borders into pieces monotone in x and y.
 
@@ -143,19 +118,29 @@ def _elliptic_pieces(arc: Arc) -> list[_Piece]:
     return pieces
 
 
-def _boundary(outline: Outline, scale: float) -> list[_Piece]:
+@dataclass(frozen=True)
+class _Boundary:
+    """An outline scaled to pixels, as the pieces of the module notes: its straight sides that
+    are not vertical, as rows (x0, y0, x1, y1), and its arcs' monotone pieces."""
+
+    segments: np.ndarray  #: (S, 4)
+    arcs: list[_Piece]
+
+
+def _boundary(outline: Outline, scale: float) -> _Boundary:
     return _scaled_boundary(outline.transformed(np.diag([scale, scale])))
 
 
-def _scaled_boundary(scaled: Outline) -> list[_Piece]:
-    """The monotone pieces of an outline already scaled to pixels."""
-    pieces: list[_Piece] = []
+def _scaled_boundary(scaled: Outline) -> _Boundary:
+    """The pieces of an outline already scaled to pixels."""
+    segments, arcs = [], []
     for piece in scaled.pieces:
         if isinstance(piece, Segment):
-            pieces.extend(_line_pieces(np.array([piece.start, piece.end]), closed=False))
+            if piece.start[0] != piece.end[0]:  # vertical sides add no area under the curve
+                segments.append((*piece.start, *piece.end))
         else:
-            pieces.extend(_elliptic_pieces(piece))
-    return pieces
+            arcs.extend(_elliptic_pieces(piece))
+    return _Boundary(np.array(segments, dtype=np.float64).reshape(-1, 4), arcs)
 
 
 def quadrant_area(
@@ -173,10 +158,25 @@ def quadrant_area(
     return _area_below_left(_boundary(outline, scale), xs, ys)
 
 
-def _area_below_left(pieces: list[_Piece], xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
-    """F(X, Y) of the module notes at the points (xs, ys), broadcast together."""
-    total = np.zeros(np.broadcast_shapes(xs.shape, ys.shape))
-    for piece in pieces:
+#: Side-point pairs :func:`_area_below_left` evaluates at once (bounds its temporaries).
+_SIDE_CHUNK = 2**18
+
+
+def _area_below_left(boundary: _Boundary, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
+    """F(X, Y) of the module notes at the points (xs, ys), broadcast together: the straight sides
+    all at once (:func:`_segment_quadrant`), for a chunk of the points at a time, then each arc's
+    pieces. Every point's sum runs over the sides in the same order however many points there
+    are, so a point gets the same value in a whole grid as among a few."""
+    shape = np.broadcast_shapes(np.shape(xs), np.shape(ys))
+    total = np.zeros(shape)
+    sides = boundary.segments
+    if len(sides):
+        flat_x, flat_y, out = np.broadcast_to(xs, shape).ravel(), np.broadcast_to(ys, shape).ravel(), total.reshape(-1)
+        step = max(1, _SIDE_CHUNK // len(sides))
+        x0, y0, x1, y1 = sides.T[:, :, None]
+        for lo in range(0, out.size, step):
+            out[lo : lo + step] = _segment_quadrant(x0, y0, x1, y1, flat_x[lo : lo + step], flat_y[lo : lo + step]).sum(axis=0)
+    for piece in boundary.arcs:
         t = np.clip(xs, piece.x_min, piece.x_max)
         x_cross = np.minimum(t, piece.crossing(ys))
         h_cross = piece.antiderivative(x_cross)
@@ -264,14 +264,13 @@ def coverage(
         aperture = aperture.near() if isinstance(aperture, Aperture) else aperture.transformed(-np.eye(2))
     outline = aperture if isinstance(aperture, Outline) else aperture.outline(field_position)
     scaled = outline.transformed(np.diag([scale, scale]))
-    pieces = _scaled_boundary(scaled)
+    boundary = _scaled_boundary(scaled)
     dx, dy = offset_xy
     xs, ys = edges - dx, edges - dy
-    straight = sum(isinstance(piece, Segment) and piece.start[0] != piece.end[0] for piece in scaled.pieces)
-    work = (size + 1) ** 2 * (straight + _ELLIPTIC_COST * (len(pieces) - straight))
+    work = (size + 1) ** 2 * (len(boundary.segments) + _ELLIPTIC_COST * len(boundary.arcs))
     crossed = None if work < _EDGE_ONLY_MIN_WORK else _edge_pixels(scaled, size, (centre + dx, centre + dy))
     if crossed is None or crossed.sum() > _EDGE_ONLY_SHARE * size * size:
-        cumulative = _area_below_left(pieces, xs[None, :], ys[:, None])
+        cumulative = _area_below_left(boundary, xs[None, :], ys[:, None])
         cells = cumulative[1:, 1:] - cumulative[:-1, 1:] - cumulative[1:, :-1] + cumulative[:-1, :-1]
         return np.clip(aperture_rows_to_image(cells), 0.0, 1.0)  # rows of `cells` run up in y
     import cv2
@@ -289,7 +288,7 @@ def coverage(
             corners[dr : dr + size, dc : dc + size] |= evaluate
     rows, cols = np.nonzero(corners)
     cumulative = np.zeros((size + 1, size + 1))
-    cumulative[rows, cols] = _area_below_left(pieces, xs[cols], ys[rows])
+    cumulative[rows, cols] = _area_below_left(boundary, xs[cols], ys[rows])
     cells = cumulative[1:, 1:] - cumulative[:-1, 1:] - cumulative[1:, :-1] + cumulative[:-1, :-1]
     inside = np.zeros(count)
     inside[1:] = cells.ravel()[probes] > 0.5  # 0 or 1 up to rounding
