@@ -321,6 +321,28 @@ def test_candidates_do_not_depend_on_the_strips(monkeypatch):
     assert strips == whole
 
 
+@pytest.mark.parametrize("keep_below,max_share", [(1e9, 8), (0.5, 10**9), (0.0, 1)])
+def test_strips_opened_again_give_the_same_candidates(monkeypatch, keep_below, max_share):
+    """A strip whose provisional threshold (made before σ is known) proves too high, or that
+    would keep too many of its pixels, is opened a second time: the candidates do not change.
+    (1e9: every strip's threshold too high; 10**9: every strip keeps too many; 0 and 1: a
+    provisional threshold of 0 keeps every positive pixel, within the share.)"""
+    from bokehfit.discs import candidates
+
+    image = strip_scene()
+    monkeypatch.setattr(candidates, "STRIP_PIXELS", 1)
+    once = candidates.find_candidates(image, 4.0, 500.0)
+    opened = []
+    original = candidates._opening
+    monkeypatch.setattr(candidates, "_opening", lambda *args: opened.append((args[0].shape, args[2])) or original(*args))
+    monkeypatch.setattr(candidates, "KEEP_BELOW_THRESHOLD", keep_below)
+    monkeypatch.setattr(candidates, "KEEP_MAX_SHARE", max_share)
+    again = candidates.find_candidates(image, 4.0, 500.0)
+    assert again == once
+    twice = len(opened) - len(set(opened))  # strips (of a band's copy) opened a second time
+    assert twice > 0 if keep_below > 1.0 or max_share > 10**6 else twice == 0
+
+
 def test_fast_median_and_percentile_are_numpys():
     from bokehfit.discs.measure import _median, _percentile
 

@@ -42,7 +42,9 @@ Work and memory: a band's copy is searched in strips of about ``STRIP_PIXELS``
 pixels, so that no temporary the size of the photo is made. Each strip's opening
 is computed with a margin of the element's reach (twice its half-side), which
 makes its rows exactly those of the whole copy's opening; σ is gathered strip by
-strip first, and the blobs are labelled per strip and joined where they run
+strip as each is opened, each strip keeping the pixels above a provisional share of
+the low threshold (opened again only where that proves too high: the first strip
+noisier than the whole), and the blobs are labelled per strip and joined where they run
 across a border (8-connected, as in one piece). Only the blobs with a pixel at
 the least peak a candidate needs are kept, as lists of their pixels; their
 figures (centroids as sums of whole numbers over the area) are those of labelling
@@ -109,6 +111,11 @@ MIN_NOISE = 1e-4
 #: Pixels of a band's image searched at a time (whole rows, and the margins the opening and
 #: the blobs need): the search's temporaries stay a small share of the photo's own arrays.
 STRIP_PIXELS = 1 << 19
+#: While σ is not yet known, a strip keeps its pixels above this share of the low threshold
+#: that the first strip's noise gives (a strip noisier than the whole photo sets it too high:
+#: it is then opened again), and at most 1 / KEEP_MAX_SHARE of its pixels.
+KEEP_BELOW_THRESHOLD = 0.5
+KEEP_MAX_SHARE = 8
 
 
 @dataclass(frozen=True)
@@ -144,23 +151,57 @@ def _strips(height: int, width: int, side: int) -> list[tuple[int, int]]:
     return [(r0, min(r0 + rows, height)) for r0 in range(0, height, rows)]
 
 
-def _noise(image: np.ndarray, element: np.ndarray) -> tuple[float, np.ndarray | None]:
-    """The band's noise level σ (module notes), and the whole opening where it is one strip.
+def _above_low(image: np.ndarray, element: np.ndarray) -> tuple[float, list]:
+    """The band's noise level σ (module notes), and per strip the pixels above the low threshold
+    SIGMA_THRESHOLD·σ: (raster index within the strip, residual, background), index ascending.
 
     σ is taken on every ``step``-th row and column of the residual (about 250 000 pixels),
-    gathered strip by strip."""
+    gathered strip by strip. Each strip's opening is computed once: the pixels above
+    ``KEEP_BELOW_THRESHOLD`` times a provisional threshold (from the first strip's samples)
+    are kept as the opening is made, and filtered once σ is known. A strip whose provisional
+    threshold proves higher than the final one, or that would keep more than
+    ``1 / KEEP_MAX_SHARE`` of its pixels, is opened again instead.
+    """
     height, width = image.shape
     step = max(1, round(math.sqrt(image.size / 250_000)))
     strips = _strips(height, width, element.shape[0])
-    samples = []
+    samples, kept, bound = [], [], None
     for r0, r1 in strips:
         background = _opening(image, element, r0, r1)
+        residual = image[r0:r1] - background
         first = -r0 % step
-        samples.append(image[r0 + first : r1 : step, ::step] - background[first::step, ::step])
-    sample = np.concatenate(samples)
+        samples.append(residual[first::step, ::step].copy())
+        if len(strips) == 1:  # the whole band at once: its residual is kept as it is
+            kept.append((None, residual, background))
+            break
+        if bound is None:
+            bound = KEEP_BELOW_THRESHOLD * SIGMA_THRESHOLD * _mad_sigma(samples[0])
+        at = np.flatnonzero(residual > bound)
+        small = at.size * KEEP_MAX_SHARE <= residual.size
+        kept.append((bound, at, residual.ravel()[at], background.ravel()[at]) if small else None)
+    sigma = _mad_sigma(np.concatenate(samples))
+    low = SIGMA_THRESHOLD * sigma
+    pixels = []
+    for (r0, r1), strip in zip(strips, kept):
+        if strip is None or strip[0] is not None and strip[0] > low:
+            background = _opening(image, element, r0, r1)
+            residual = image[r0:r1] - background
+            strip = (None, residual, background)
+        if strip[0] is None:  # dense: the strip's residual and background
+            _, residual, background = strip
+            at = np.flatnonzero(residual > low)
+            pixels.append((at, residual.ravel()[at], background.ravel()[at]))
+        else:
+            _, at, residual, background = strip
+            above = residual > low
+            pixels.append((at[above], residual[above], background[above]))
+    return sigma, pixels
+
+
+def _mad_sigma(sample: np.ndarray) -> float:
+    """1.4826 × the median absolute deviation of ``sample``, at least MIN_NOISE."""
     median = float(np.median(sample))
-    sigma = max(MIN_NOISE, 1.4826 * float(np.median(np.abs(sample - median))))
-    return sigma, background if len(strips) == 1 else None
+    return max(MIN_NOISE, 1.4826 * float(np.median(np.abs(sample - median))))
 
 
 @dataclass(frozen=True)
@@ -231,9 +272,9 @@ def _strip_labels(mask: np.ndarray, offset: int) -> tuple[int, np.ndarray, tuple
     return count - 1, labels, (labels[0].copy(), labels[-1].copy())
 
 
-def _band_blobs(image, element, whole, sigma) -> tuple[_Blobs, _Blobs, np.ndarray]:
-    """The low-threshold blobs of a band's image that may give candidates, their half-peak
-    regions, and per half-peak region the index of its blob.
+def _band_blobs(image, element) -> tuple[float, _Blobs, _Blobs, np.ndarray]:
+    """The band's noise level σ, the low-threshold blobs of its image that may give
+    candidates, their half-peak regions, and per half-peak region the index of its blob.
 
     The image is searched in strips of rows (the opening with a margin of its reach, so
     that every row is exact), and regions that run across the borders of strips are joined.
@@ -243,30 +284,31 @@ def _band_blobs(image, element, whole, sigma) -> tuple[_Blobs, _Blobs, np.ndarra
     candidates' blobs cover a small part of the image.
     """
     height, width = image.shape
+    sigma, above = _above_low(image, element)
     least = max(PEAK_SIGMA * sigma, MIN_CONTRAST_ABS)
     strips = _strips(height, width, element.shape[0])
     index = np.int32 if image.size < 2**31 else np.int64
     kept: dict[str, list[np.ndarray]] = {"flat": [], "residual": [], "background": [], "label": []}
     edges, seeds, total = [], [], 0
-    for r0, r1 in strips:
-        background = whole[r0:r1] if whole is not None else _opening(image, element, r0, r1)
-        residual = image[r0:r1] - background
-        low = residual > SIGMA_THRESHOLD * sigma
-        count, labels, edge = _strip_labels(low, total)
+    for (r0, r1), (at, residual, background) in zip(strips, above):
+        mask = np.zeros((r1 - r0, width), dtype=np.bool_)
+        mask.ravel()[at] = True
+        count, labels, edge = _strip_labels(mask, total)
+        label = labels.ravel()[at]
         wanted = np.zeros(total + count + 1, dtype=np.bool_)
-        wanted[labels[low & (residual >= least)] + 1] = True
+        wanted[label[residual >= least] + 1] = True
         seeds.append(np.flatnonzero(wanted) - 1)
         # A blob without a seed here may still be joined to one in another strip through a border row.
         wanted[np.concatenate(edge) + 1] = True
         wanted[0] = False  # no pixel
-        at = np.flatnonzero(wanted[labels + 1])
-        kept["flat"].append((at + r0 * width).astype(index))
-        kept["residual"].append(residual.ravel()[at])
-        kept["background"].append(background.ravel()[at])
-        kept["label"].append(labels.ravel()[at])
+        chosen = wanted[label + 1]
+        kept["flat"].append((at[chosen] + r0 * width).astype(index))
+        kept["residual"].append(residual[chosen])
+        kept["background"].append(background[chosen])
+        kept["label"].append(label[chosen])
         edges.append(edge)
         total += count
-    del background, residual, low, labels, wanted, at  # the last strip's
+    del above, mask, labels, label, wanted, chosen  # the strips' pixels above the low threshold
     _, region = _join(edges, total, width)
     seeded = np.zeros(total, dtype=np.bool_)
     seeded[region[np.concatenate(seeds)]] = True
@@ -298,7 +340,7 @@ def _band_blobs(image, element, whole, sigma) -> tuple[_Blobs, _Blobs, np.ndarra
     region = region[np.concatenate(parts)]
     owner = np.zeros(count, dtype=np.int64)
     owner[region] = blob_of
-    return blobs, _describe(region, count, flat, residual, background, width), owner
+    return sigma, blobs, _describe(region, count, flat, residual, background, width), owner
 
 
 def _band_candidates(image: np.ndarray, factor: float, band: float, min_diameter: float) -> list[Candidate]:
@@ -306,9 +348,8 @@ def _band_candidates(image: np.ndarray, factor: float, band: float, min_diameter
     reach = BACKGROUND_REACH_LARGE if 2.0 * band >= LARGE_DISC_PX else BACKGROUND_REACH
     side = 2 * math.ceil(reach * band / factor) + 3
     element = cv2.getStructuringElement(cv2.MORPH_RECT, (side, side))
-    sigma, whole = _noise(image, element)
     low = min_diameter if band <= min_diameter * 1.01 else BAND_OVERLAP_LOW * band
-    blobs, regions, owner = _band_blobs(image, element, whole, sigma)
+    sigma, blobs, regions, owner = _band_blobs(image, element)
     diameters = 2.0 * np.sqrt(regions.area / math.pi) * factor
     floor = np.maximum(MIN_CONTRAST_ABS, contrast_floor_rel(diameters) * regions.background)
     keep = (diameters >= low) & (diameters < BAND_OVERLAP_HIGH * 2.0 * band)
