@@ -96,6 +96,22 @@ def test_srgb_jpeg_round_trip_within_two_codes(tmp_path):
     assert photo.clipped[:, -32:].all() and not photo.clipped[:, :-32].any()
 
 
+def test_photo_arrays_on_plain_pages_are_the_same(tmp_path, monkeypatch):
+    """Large photo arrays are mapped without transparent huge pages (photo._photo_array); a photo
+    read so has the same pixels, luminance and clipped mask as one read on NumPy's own arrays."""
+    path = write_jpeg(tmp_path / "levels.jpg", grey_patches(LEVELS))
+    monkeypatch.setattr(photo_module, "PLAIN_PAGES_BYTES", 1 << 62)  # NumPy's arrays
+    plain = load_photo(path)
+    monkeypatch.setattr(photo_module, "PLAIN_PAGES_BYTES", 0)  # every array mapped by _photo_array
+    mapped = load_photo(path)
+    for name in ("luminance", "clipped", "display"):
+        a, b = getattr(plain, name), getattr(mapped, name)
+        assert a.dtype == b.dtype and np.array_equal(a, b) and not b.flags.writeable, name
+    fresh = photo_module._photo_array((3, 5), np.float32)
+    fresh[...] = 7.0  # writable until frozen
+    assert fresh.shape == (3, 5) and fresh.dtype == np.float32 and float(fresh.sum()) == 105.0
+
+
 @pytest.mark.parametrize("bits", [8, 16])
 def test_png_round_trip_exact_with_clipped_mask(tmp_path, bits):
     codes = random_codes((40, 56, 3), bits, seed=bits)
