@@ -580,10 +580,8 @@ def _linearise_integer(pixels: np.ndarray, bits: int, order: str, encoding: Enco
             np.take(columns[0], block[..., 0], out=out)
             out += np.take(columns[1], block[..., 1])
             out += np.take(columns[2], block[..., 2])
-        at_top = (block == top).view(np.uint8)
-        mask = clipped[r0:r1].view(np.uint8)
-        np.bitwise_or(at_top[..., 0], at_top[..., 1], out=mask)
-        np.bitwise_or(mask, at_top[..., 2], out=mask)
+        # Clipped: some channel at the top code, i.e. not all three below it (one OpenCV pass).
+        np.equal(cv2.inRange(block, (0, 0, 0), (top - 1,) * 3), 0, out=clipped[r0:r1])
         bar.step("linearise")
     # The display is the decoded image itself, not a copy of it: its channels are swapped in
     # place, a block at a time (OpenCV copies a whole source that is also the destination).
