@@ -43,8 +43,8 @@ pixels, so that no temporary the size of the photo is made. Each strip's opening
 is computed with a margin of the element's reach (twice its half-side), which
 makes its rows exactly those of the whole copy's opening; σ is gathered strip by
 strip as each is opened, each strip keeping the pixels above a provisional share of
-the low threshold (opened again only where that proves too high: the first strip
-noisier than the whole), and the blobs are labelled per strip and joined where they run
+the low threshold (opened again where that proves too high, the first strip noisier
+than the whole, or keeps too many pixels), and the blobs are labelled per strip and joined where they run
 across a border (8-connected, as in one piece). Only the blobs with a pixel at
 the least peak a candidate needs are kept, as lists of their pixels; their
 figures (centroids as sums of whole numbers over the area) are those of labelling
@@ -98,6 +98,9 @@ BAND_SIDE_PX = 6.0
 #: Smallest disc of a band whose copy would be reduced by less than 2: it is searched on the
 #: photo halved instead (discs from this size there), where that keeps them this large.
 MIN_COPY_SIDE_PX = 4.0
+#: A band's copy is area-averaged from the smallest copy made before it whose pixels are at
+#: least this many times finer (else from the photo halved): so fine a source adds at most an
+#: eighth of a pixel of blur, and no band resamples a large image into a very small one.
 COPY_SOURCE_RATIO = 8.0
 #: A low-threshold blob this many times larger than its largest half-peak region is also a
 #: cluster candidate (a disc's blur and glow make its blob up to about 2 times larger).
@@ -168,15 +171,15 @@ def _above_low(image: np.ndarray, element: np.ndarray) -> tuple[float, list]:
     height, width = image.shape
     step = max(1, round(math.sqrt(image.size / 250_000)))
     strips = _strips(height, width, element.shape[0])
-    samples, kept, bound = [], [], None
+    samples, kept, bound = [], [], None  # kept: per strip (bound, index, residual, background), or None
     for r0, r1 in strips:
         background = _opening(image, element, r0, r1)
         residual = image[r0:r1] - background
         first = -r0 % step
         samples.append(residual[first::step, ::step].copy())
-        if len(strips) == 1:  # the whole band at once: its residual is kept as it is
-            kept.append((None, residual, background))
-            break
+        if len(strips) == 1:  # the whole band at once: σ, then its pixels above the low threshold
+            sigma = _mad_sigma(samples[0])
+            return sigma, [_above(residual, background, SIGMA_THRESHOLD * sigma)]
         if bound is None:
             bound = KEEP_BELOW_THRESHOLD * SIGMA_THRESHOLD * _mad_sigma(samples[0])
         at = np.flatnonzero(residual > bound)
@@ -186,19 +189,20 @@ def _above_low(image: np.ndarray, element: np.ndarray) -> tuple[float, list]:
     low = SIGMA_THRESHOLD * sigma
     pixels = []
     for (r0, r1), strip in zip(strips, kept):
-        if strip is None or strip[0] is not None and strip[0] > low:
+        if strip is None or strip[0] > low:  # opened again
             background = _opening(image, element, r0, r1)
-            residual = image[r0:r1] - background
-            strip = (None, residual, background)
-        if strip[0] is None:  # dense: the strip's residual and background
-            _, residual, background = strip
-            at = np.flatnonzero(residual > low)
-            pixels.append((at, residual.ravel()[at], background.ravel()[at]))
+            pixels.append(_above(image[r0:r1] - background, background, low))
         else:
             _, at, residual, background = strip
             above = residual > low
             pixels.append((at[above], residual[above], background[above]))
     return sigma, pixels
+
+
+def _above(residual: np.ndarray, background: np.ndarray, low: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A strip's pixels whose residual exceeds ``low``: (raster index, residual, background)."""
+    at = np.flatnonzero(residual > low)
+    return at, residual.ravel()[at], background.ravel()[at]
 
 
 def _mad_sigma(sample: np.ndarray) -> float:

@@ -527,7 +527,8 @@ def _photo_array(shape: tuple[int, ...], dtype) -> np.ndarray:
     dtype = np.dtype(dtype)
     count = math.prod(shape)
     size = count * dtype.itemsize
-    if size < max(PLAIN_PAGES_BYTES, 1) or not hasattr(mmap, "MADV_NOHUGEPAGE") or not hasattr(mmap, "MAP_ANONYMOUS"):
+    advisable = hasattr(mmap, "MADV_NOHUGEPAGE") and hasattr(mmap, "MAP_ANONYMOUS")
+    if size < max(PLAIN_PAGES_BYTES, 1) or not advisable:
         return np.empty(shape, dtype=dtype)
     memory = mmap.mmap(-1, size, flags=mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS)
     try:

@@ -171,11 +171,13 @@ def _area_below_left(boundary: _Boundary, xs: np.ndarray, ys: np.ndarray) -> np.
     total = np.zeros(shape)
     sides = boundary.segments
     if len(sides):
-        flat_x, flat_y, out = np.broadcast_to(xs, shape).ravel(), np.broadcast_to(ys, shape).ravel(), total.reshape(-1)
+        flat_x, flat_y = np.broadcast_to(xs, shape).ravel(), np.broadcast_to(ys, shape).ravel()
+        out = total.reshape(-1)
         step = max(1, _SIDE_CHUNK // len(sides))
         x0, y0, x1, y1 = sides.T[:, :, None]
         for lo in range(0, out.size, step):
-            out[lo : lo + step] = _segment_quadrant(x0, y0, x1, y1, flat_x[lo : lo + step], flat_y[lo : lo + step]).sum(axis=0)
+            chunk = slice(lo, lo + step)
+            out[chunk] = _segment_quadrant(x0, y0, x1, y1, flat_x[chunk], flat_y[chunk]).sum(axis=0)
     for piece in boundary.arcs:
         t = np.clip(xs, piece.x_min, piece.x_max)
         x_cross = np.minimum(t, piece.crossing(ys))
