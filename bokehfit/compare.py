@@ -9,6 +9,7 @@ number everywhere.
 
 from __future__ import annotations
 
+import hashlib
 import math
 import os
 import time
@@ -19,7 +20,8 @@ from skimage import measure
 
 from bokehfit import __version__
 from bokehfit.apertures import Aperture
-from bokehfit.discs import COMPARE_MIN_DIAMETER_PX, MIN_FIT_SEEN, Disc, DiscSearch, find_discs
+from bokehfit.discs import COMPARE_MIN_DIAMETER_PX, MIN_FIT_SEEN, Disc, DiscSearch, find_discs, measure_discs_at
+from bokehfit.discs.labels import DiscLabels, read_labels
 from bokehfit.discs.measure import RESOLVABLE_PX
 from bokehfit.errors import InputError
 from bokehfit.fit import LENS_FEATURES, REGULAR_OUTLINE_MISFIT, ApertureFit, FailedFit, FitOptions, fit_aperture
@@ -159,6 +161,16 @@ class Comparison:
         if self.rejection:
             return "no_fit"
         return "unsure" if self.doubts else "fitted"
+
+    @property
+    def usable_discs(self) -> list[Disc]:
+        """The discs found that the fit could use (:attr:`Disc.usable`)."""
+        return [disc for disc in self.search.discs if disc.usable]
+
+    @property
+    def used_discs(self) -> list[Disc]:
+        """The discs the fit used (fitted and kept by the consensus)."""
+        return [disc for disc in self.search.discs if self.fit.disc_fit(disc) is not None]
 
     @property
     def reason(self) -> str | None:
@@ -630,6 +642,7 @@ def compare_photo(
     min_diameter_px: float = COMPARE_MIN_DIAMETER_PX,
     max_diameter_px: float = 500.0,
     fit_options: FitOptions | None = None,
+    discs: str | os.PathLike | DiscLabels | None = None,
     progress=None,
     adapter: AdapterChoice | None = None,
 ) -> Comparison:
@@ -641,7 +654,10 @@ def compare_photo(
     with ``bokehfit discs``'s 4 px both find the same discs, and those under
     ``RESOLVABLE_PX`` are found but not usable. ``fit_options`` is
     the fit's budget (:class:`bokehfit.fit.FitOptions`); ``adapter`` chooses
-    the GPU of the kernel (:func:`bokehfit.gpu.get_gpu`).
+    the GPU of the kernel (:func:`bokehfit.gpu.get_gpu`). ``discs`` (a discs
+    file in the labels' format, :mod:`bokehfit.discs.labels`, or its
+    :class:`DiscLabels`) replaces the search: its usable discs, and only
+    those, are measured afresh at their places and fitted.
     Raises ``InputError`` for unreadable input; every other outcome is a
     Comparison with its ``status`` and ``reason``.
     """
@@ -659,7 +675,14 @@ def compare_photo(
     )
     timing["load"] = time.perf_counter() - start
     notify("detect")
-    search = find_discs(photo.luminance, photo.clipped, min_diameter_px=min_diameter_px, max_diameter_px=max_diameter_px)
+    if discs is None:
+        search = find_discs(photo.luminance, photo.clipped, min_diameter_px=min_diameter_px,
+                            max_diameter_px=max_diameter_px)
+    else:
+        labels = discs if isinstance(discs, DiscLabels) else read_labels(discs)
+        _check_labels_photo(labels, photo)
+        search = measure_discs_at(photo.luminance, photo.clipped,
+                                  [(disc.center_xy, disc.diameter_px) for disc in labels.usable])
     timing["detect"] = search.time_s
     notify("fit")
     fit = fit_aperture(photo.luminance, search.discs, shapes=shapes, focus_side=focus_side, options=fit_options,
@@ -700,6 +723,21 @@ def compare_photo(
     if fit:
         comparison.doubts, comparison.rejection = judge(fit, metrics)
     return comparison
+
+
+def _check_labels_photo(labels: DiscLabels, photo: Photo) -> None:
+    """``InputError`` where a discs file names another photo (its size or its sha256)."""
+    height, width = photo.luminance.shape
+    if labels.width is not None and labels.height is not None and (labels.width, labels.height) != (width, height):
+        raise InputError(f"the discs file is for a {labels.width}×{labels.height} photo; "
+                         f"{photo.path.name} is {width}×{height}")
+    if labels.sha256 is not None:
+        digest = hashlib.sha256()
+        with open(photo.path, "rb") as file:
+            for block in iter(lambda: file.read(1 << 20), b""):
+                digest.update(block)
+        if digest.hexdigest() != labels.sha256.lower():
+            raise InputError(f"the discs file is for another photo (its sha256 is not {photo.path.name}'s)")
 
 
 def judge(fit: ApertureFit, metrics: dict[str, float | None]) -> tuple[list[str], str | None]:

@@ -61,6 +61,10 @@ def add_parser(subparsers) -> None:
                         help=f"smallest disc sought (default {COMPARE_MIN_DIAMETER_PX:g}: the smallest that can show a "
                              f"shape; {DEFAULT_MIN_DIAMETER_PX:g} counts the smaller glints as `bokehfit discs` does, "
                              f"reported but not fitted, at about twice the search time on a large photo)")
+    parser.add_argument("--discs", metavar="DISCS.json",
+                        help="fit exactly these discs instead of finding them: a JSON file in the disc labels' format "
+                             "({\"discs\": [{\"center_xy\": [x, y], \"diameter_px\": D}, ...]}; entries with "
+                             "\"usable\": false and \"junk\" are ignored), each measured afresh at its place")
     parser.add_argument("--max-diameter-px", type=float, default=DEFAULT_MAX_DIAMETER_PX,
                         help="largest disc sought, pixels, or inf for no limit (default %(default)g, as for `bokehfit discs`)")
     parser.set_defaults(run=run)
@@ -144,6 +148,7 @@ def run(args: argparse.Namespace) -> Comparison:
             light_distance_m=args.light_distance_m,
             min_diameter_px=args.min_diameter_px,
             max_diameter_px=args.max_diameter_px,
+            discs=args.discs,
             progress=progress,
             adapter=args.adapter,
         )

@@ -29,7 +29,7 @@ from __future__ import annotations
 import math
 import time
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
@@ -44,6 +44,7 @@ __all__ = [
     "DiscSearch",
     "Rejection",
     "find_discs",
+    "measure_discs_at",
     "DEFAULT_MIN_DIAMETER_PX",
     "COMPARE_MIN_DIAMETER_PX",
     "DEFAULT_MAX_DIAMETER_PX",
@@ -443,6 +444,66 @@ def find_discs(
         else:
             rejected[reason] += 1
             rejections.append(Rejection(where, size, reason))
+    return _discs_of(measurements, found, rejected, start, notes, rejections, max_discs)
+
+
+def measure_discs_at(
+    luminance: np.ndarray,
+    clipped: np.ndarray | None = None,
+    places=(),
+) -> DiscSearch:
+    """Measure the discs at given places (a person's picks), and only those.
+
+    Parameters
+    ----------
+    luminance, clipped : as :func:`find_discs`.
+    places : iterable of ((x, y), diameter_px)
+        Each disc's centre (full-resolution pixels, y down) and about how large it is.
+
+    Returns
+    -------
+    DiscSearch
+        Each place measured afresh as :func:`find_discs` measures a candidate (outline, levels,
+        evidence), whatever the finder's own tests of a disc would say: the person vouches that
+        it is one. A place that overlaps others is measured as the part of its cluster closest to
+        it. A place where no outline of about that size can be drawn is listed in ``rejections``
+        with the reason; the others are the discs (not usable ones keep their reasons).
+    """
+    start = time.perf_counter()
+    luminance = _check_image(luminance)
+    clipped, _, _, _ = _check_parameters(luminance.shape, clipped, 1.0, math.inf, None)
+    places = [((float(x), float(y)), float(d)) for (x, y), d in places]
+    rejected: Counter = Counter()
+    rejections: list[Rejection] = []
+    measurements: list[Measurement] = []
+    height, width = luminance.shape
+    for xy, diameter in places:
+        reason = None
+        if not (0 <= xy[0] < width and 0 <= xy[1] < height):
+            reason = "outside the photo"
+        else:
+            # Any size is measured (min 1 px): too small to show a shape is said by Disc.resolvable.
+            m = measure_candidate(luminance, clipped, xy, diameter, 0.5 * diameter, MIN_NOISE, 1.0)
+            if isinstance(m, str):
+                reason = m
+            else:
+                parts = [m] + (split_cluster(m) if m.overlaps and m.diameter_px >= 2.0 * RESOLVABLE_PX else [])
+                m = min(parts, key=lambda p: math.hypot(p.center_xy[0] - xy[0], p.center_xy[1] - xy[1]) / diameter
+                        + abs(math.log(p.diameter_px / diameter)))
+                if abs(math.log(m.diameter_px / diameter)) > math.log(2.0) or \
+                        math.hypot(m.center_xy[0] - xy[0], m.center_xy[1] - xy[1]) > 0.5 * diameter:
+                    reason = (f"the outline measured there ({m.diameter_px:.0f} px at {m.center_xy[0]:.0f},"
+                              f" {m.center_xy[1]:.0f}) is not a disc of about {diameter:.0f} px")
+                else:
+                    measurements.append(replace(m, reason=None))
+        if reason is not None:
+            rejected[reason] += 1
+            rejections.append(Rejection(xy, diameter, reason))
+    return _discs_of(measurements, len(places), rejected, start, [], rejections, None)
+
+
+def _discs_of(measurements, found, rejected, start, notes, rejections, max_discs) -> DiscSearch:
+    """The search's discs from its measurements: one per disc, largest first, each with what it offers."""
     measurements = _distinct_measurements(measurements)
     measurements.sort(key=lambda m: -m.diameter_px)
     if max_discs is not None:

@@ -1,0 +1,161 @@
+"""The disc finder against a person's disc labels, on the real reference photos.
+
+Usage::
+
+    BOKEHFIT_REFERENCE_DIR=path/to/reference_photos python benchmarks/real_discs.py [--json out.json] [--only 04 09]
+        [--no-person]
+
+For every photo of ``reference_photos/manifest.json`` that has a person's
+labels (``$BOKEHFIT_REFERENCE_DIR/discs/NAME.discs.json``, same sha256), it
+runs ``compare`` in this process twice:
+
+- **own discs**: as ``bokehfit compare PHOTO`` does, and scores what it found
+  against the labels (:func:`bokehfit.discs.labels.score_discs`): the recall of
+  labelled usable discs found as usable, what each disc the fit used is (a
+  labelled disc, labelled junk, a labelled disc mis-sized by more than 25 %, an
+  unlabelled blob inside a box where the labels are complete, or unknown outside
+  one), and the median size error of the matched discs;
+- **person's discs**: as ``bokehfit compare PHOTO --discs LABELS`` does, fitted
+  on the labelled usable discs only,
+
+and prints the whole-photo answer of each beside the label (the verdicts of
+``benchmarks/real_photos.py``), so that a wrong answer is known to be the
+finder's or the fit's. Pooled figures close the table. It asserts nothing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import os
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from real_photos import MANIFEST, answer, find_photo, judge  # noqa: E402
+
+from bokehfit.compare import compare_photo  # noqa: E402
+from bokehfit.discs.labels import DiscLabels, DiscScore, read_labels, score_discs  # noqa: E402
+
+
+def labels_for(entry: dict) -> tuple[Path, DiscLabels] | None:
+    """The labels file of a manifest entry and its labels, where they exist for this very photo."""
+    folder = os.environ.get("BOKEHFIT_REFERENCE_DIR")
+    if not folder:
+        return None
+    path = Path(folder) / "discs" / f"{entry['file']}.discs.json"
+    if not path.is_file():
+        return None
+    labels = read_labels(path)
+    return (path, labels) if labels.sha256 in (None, entry["sha256"]) else None
+
+
+def places(discs) -> list:
+    return [(tuple(d.center_xy), float(d.diameter_px)) for d in discs]
+
+
+def score_comparison(comparison, labels: DiscLabels) -> DiscScore:
+    return score_discs(labels, places(comparison.usable_discs), places(comparison.used_discs))
+
+
+def why_missed(comparison, score: DiscScore) -> Counter:
+    """Why each labelled usable disc was not found usable: found but not usable (the disc's problems),
+    found at its place with another size, a candidate measured and rejected there (the reason), or
+    no candidate at all."""
+    from bokehfit.compare import disc_problems
+    from bokehfit.discs.labels import MATCH_CENTRE_REL, matches
+
+    reasons = Counter()
+    for label in score.missed:
+        def near(xy):
+            return ((xy[0] - label.center_xy[0]) ** 2 + (xy[1] - label.center_xy[1]) ** 2) ** 0.5 \
+                <= MATCH_CENTRE_REL * label.diameter_px
+        found = [d for d in comparison.search.discs if matches(d.center_xy, d.diameter_px, label)]
+        placed = [d for d in comparison.search.discs if near(d.center_xy)]
+        rejected = [r for r in comparison.search.rejections if near(r.center_xy)]
+        if found:
+            reasons["found, not usable: " + ", ".join(disc_problems(found[0])).split(" (")[0]] += 1
+        elif placed:
+            ratio = placed[0].diameter_px / label.diameter_px
+            reasons[f"found {'larger' if ratio > 1 else 'smaller'} ({label.kind})"] += 1
+        elif rejected:
+            reasons[f"rejected: {rejected[0].rejected_because.split(' (')[0]} ({label.kind})"] += 1
+        else:
+            reasons[f"no candidate ({label.kind})"] += 1
+    return reasons
+
+
+def row(comparison, label: dict, seconds: float) -> dict:
+    data = comparison.to_json("")
+    return {"answer": answer(data.get("aperture")), "status": comparison.status,
+            "verdict": judge(label, data), "reason": comparison.reason, "seconds": round(seconds, 1)}
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--json", type=Path, help="write the table as JSON")
+    parser.add_argument("--only", nargs="*", help="photos whose file names start with these")
+    parser.add_argument("--no-person", action="store_true", help="skip the fit on the person's discs")
+    args = parser.parse_args(argv)
+    manifest = json.loads(MANIFEST.read_text(encoding="utf-8"))
+    pooled = DiscScore(0, 0, 0)
+    verdicts = {"own": Counter(), "person": Counter()}
+    rows = []
+    for entry in manifest["photos"]:
+        if args.only and not any(entry["file"].startswith(o) for o in args.only):
+            continue
+        photo, found = find_photo(entry), labels_for(entry)
+        if photo is None or found is None:
+            print(f"{entry['file']}: {'missing' if photo is None else 'no labels'} (set BOKEHFIT_REFERENCE_DIR)")
+            continue
+        labels_path, labels = found
+        start = time.perf_counter()
+        comparison = compare_photo(photo)
+        own = row(comparison, entry["label"], time.perf_counter() - start)
+        score = score_comparison(comparison, labels)
+        pooled += score
+        verdicts["own"][own["verdict"].split(" (")[0]] += 1
+        figures = score.to_json()
+        print(f"\n{entry['file']}  [{own['seconds']:.1f} s]")
+        recall = "-" if score.recall is None else f"{score.recall:.0%}"
+        share = "-" if score.junk_share is None else f"{score.junk_share:.0%}"
+        error = figures["median_abs_diameter_error"]
+        print(f"  own discs:     recall {score.usable_found}/{score.usable_labelled} ({recall}), used {score.used}: "
+              + ", ".join(f"{n} {what}" for what, n in score.used_as.most_common())
+              + f"; junk {share}; size error {'-' if error is None else f'{error:.1%}'}")
+        print(f"                 {own['answer']}  {own['status']} -> {own['verdict']}")
+        for why, n in why_missed(comparison, score).most_common(6):
+            print(f"                 missed {n} × {why}")
+        for xy, size, what in score.junk_used[:6]:
+            print(f"                 used {what}: ({xy[0]:.0f}, {xy[1]:.0f}) {size:.0f} px")
+        result = {"file": entry["file"], "label": entry["label"], "own": own, "score": figures}
+        if not args.no_person and labels.usable:
+            start = time.perf_counter()
+            person = compare_photo(photo, discs=labels_path)
+            mine = row(person, entry["label"], time.perf_counter() - start)
+            verdicts["person"][mine["verdict"].split(" (")[0]] += 1
+            print(f"  person's discs ({len(labels.usable)}): {mine['answer']}  {mine['status']} -> {mine['verdict']}"
+                  f"  [{mine['seconds']:.1f} s]")
+            result["person"] = mine
+        rows.append(result)
+    figures = pooled.to_json()
+    print("\npooled: recall {}/{} ({}), used {}: {}; junk share {}; median size error {}".format(
+        pooled.usable_found, pooled.usable_labelled, "-" if pooled.recall is None else f"{pooled.recall:.1%}",
+        pooled.used, ", ".join(f"{n} {w}" for w, n in pooled.used_as.most_common()),
+        "-" if pooled.junk_share is None else f"{pooled.junk_share:.1%}",
+        "-" if figures["median_abs_diameter_error"] is None else f"{figures['median_abs_diameter_error']:.1%}"))
+    for who, counted in verdicts.items():
+        if counted:
+            print(f"verdicts ({who} discs): " + ", ".join(f"{n} {v}" for v, n in counted.most_common()))
+    print("targets: recall ≥ 90 %, junk ≤ 3 % of used discs, no WRONG; with the person's discs every photo right")
+    if args.json:
+        args.json.write_text(json.dumps({"photos": rows, "pooled": figures}, indent=1), encoding="utf-8")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
