@@ -8,6 +8,7 @@ images and two shapes to try keep each compare around a second on a CPU adapter.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import re
@@ -270,6 +271,122 @@ def test_a_killed_worker_process_is_replaced_and_the_survey_completes(tmp_path, 
     assert survey.returncode == 0, err
     assert {name: row["status"] for name, row in rows(tmp_path / "w.duckdb").items()} == EXPECTED_STATUS
     assert len({row["worker"] for row in rows(tmp_path / "w.duckdb").values() if row["worker"]}) == 2  # a new process
+
+
+# --------------------------------------------------------------------------------------
+# Stopped with Ctrl-C (SIGINT to the process group), or the parent killed alone
+# --------------------------------------------------------------------------------------
+
+#: A survey whose photo named ``0_stuck.jpg`` never finishes in its worker (it sleeps); spawned workers
+#: run this script again (as ``__mp_main__``), so the stand-in reaches them. Other photos run as usual.
+STUCK_SCRIPT = """\
+import functools, os, sys, time
+import bokehfit.compare
+
+_real = bokehfit.compare.compare_photo
+
+@functools.wraps(_real)
+def _stuck(path, **options):
+    if os.path.basename(str(path)).startswith("0_stuck"):
+        time.sleep(3600)
+    return _real(path, **options)
+
+bokehfit.compare.compare_photo = _stuck
+
+if __name__ == "__main__":
+    from bokehfit.cli import entry_point
+
+    sys.argv = ["bokehfit", "survey", *sys.argv[1:]]
+    entry_point()
+"""
+#: Wall-clock limits, generous for a busy machine: the old survey took minutes (it waited for the stuck photo).
+STOP_LIMIT_S, ORPHAN_LIMIT_S = 20.0, 20.0
+
+
+def _start_stuck_survey(tmp_path: Path):
+    """A survey of the library plus a stuck photo, started in its own process group; returns it once the
+    other photos' reports are written, with the worker processes (psutil) it has then."""
+    import psutil
+
+    library = make_library(tmp_path / "lib")
+    write_render(library / "0_stuck.jpg", 2.0, "circle", 7)
+    (tmp_path / "stuck.py").write_text(STUCK_SCRIPT)
+    command = [sys.executable, "stuck.py", "lib", "--db", "s.duckdb", "--jobs", 2, *COMPARE_OPTIONS]
+    survey = subprocess.Popen(list(map(str, command)), cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                              text=True, start_new_session=True)
+    reports = tmp_path / "s_reports"
+    deadline = time.monotonic() + 240
+    while len(list(reports.glob("*.json"))) < 5 and survey.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.05)  # the 4 renders and the photo with no disc have reports; the stuck photo never will
+    assert survey.poll() is None, survey.communicate()
+    workers = [p for p in psutil.Process(survey.pid).children(recursive=True)
+               if any("spawn_main" in part for part in p.cmdline())]
+    assert len(workers) == 2, workers
+    return survey, workers
+
+
+def _gone_within(processes, seconds: float) -> list:
+    import psutil
+
+    _, alive = psutil.wait_procs(processes, timeout=seconds)
+    return alive
+
+
+def test_ctrl_c_stops_within_seconds_and_keeps_every_finished_photo(tmp_path, gpu):
+    survey, workers = _start_stuck_survey(tmp_path)
+    try:
+        finished = {p.name for p in (tmp_path / "s_reports").glob("*.json")}
+        started = time.monotonic()
+        os.killpg(survey.pid, signal.SIGINT)  # Ctrl-C in a terminal reaches the whole group
+        out, err = survey.communicate(timeout=STOP_LIMIT_S)
+        stop_s = time.monotonic() - started
+    finally:
+        if survey.poll() is None:
+            os.killpg(survey.pid, signal.SIGKILL)
+            survey.communicate(timeout=60)
+    print(f"first Ctrl-C: stopped in {stop_s:.2f} s")
+    assert survey.returncode == 130, err
+    assert "Traceback" not in err, err
+    assert "survey interrupted (rerun to resume)" in out, out
+    assert not _gone_within(workers, 5.0), "worker processes outlived the survey"
+    stored = rows(tmp_path / "s.duckdb")
+    assert "0_stuck.jpg" not in stored  # in progress: dropped, not stored half done
+    kept = {Path(row["json_path"]).name for row in stored.values() if row["json_path"]}
+    assert finished <= kept, "a photo finished before Ctrl-C was not stored"
+    assert {name: row["status"] for name, row in stored.items()} == EXPECTED_STATUS
+
+
+def test_a_second_ctrl_c_stops_at_once_without_a_traceback(tmp_path, gpu):
+    survey, workers = _start_stuck_survey(tmp_path)
+    try:
+        started = time.monotonic()
+        os.killpg(survey.pid, signal.SIGINT)
+        time.sleep(0.05)
+        os.killpg(survey.pid, signal.SIGINT)
+        out, err = survey.communicate(timeout=STOP_LIMIT_S)
+        stop_s = time.monotonic() - started
+    finally:
+        if survey.poll() is None:
+            os.killpg(survey.pid, signal.SIGKILL)
+            survey.communicate(timeout=60)
+    print(f"two Ctrl-C: stopped in {stop_s:.2f} s")
+    assert survey.returncode in (130, -signal.SIGINT), err  # the second may come after the first's exit began
+    assert "Traceback" not in err and "Exception ignored" not in err, err
+    assert not _gone_within(workers, 5.0), "worker processes outlived the survey"
+    rows(tmp_path / "s.duckdb")  # the database opens
+
+
+def test_killing_the_parent_alone_leaves_no_worker_behind(tmp_path, gpu):
+    survey, workers = _start_stuck_survey(tmp_path)
+    try:
+        assert all(os.getpgid(p.pid) == survey.pid for p in workers), "workers left the survey's process group"
+        survey.kill()  # the parent only, as an OOM killer or `kill -9 PID` would
+        survey.communicate(timeout=60)
+        alive = _gone_within(workers, ORPHAN_LIMIT_S)
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(survey.pid, signal.SIGKILL)
+    assert not alive, f"orphaned workers: {alive}"
 
 
 # --------------------------------------------------------------------------------------

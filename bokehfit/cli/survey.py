@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
+import signal
 
 from bokehfit.errors import InputError, check_positive
 from bokehfit.fit import FOCUS_SIDES
@@ -110,6 +112,12 @@ def compare_options(args: argparse.Namespace) -> dict:
     return {name: value for name, value in options.items() if value is not None}
 
 
+def _stop_at_once(signum, frame):
+    """A Ctrl-C after the survey stopped: end now (every stored row is committed)."""
+    os.write(2, b"bokehfit: stopped\n")
+    os._exit(130)
+
+
 def run(args: argparse.Namespace):
     from bokehfit.outputs import check_output_path
     from bokehfit.survey import export_parquet, prepare_survey, write_report
@@ -135,6 +143,8 @@ def run(args: argparse.Namespace):
                 store=store, scheduler=args.scheduler, html=not args.no_html, retry_failed=args.retry_failed,
                 adapter=args.adapter, command_line=args.command_line, **prepared,
             )
+            if run_.interrupted:  # its workers are stopped: another Ctrl-C ends the process at once
+                signal.signal(signal.SIGINT, _stop_at_once)
             total = store.count()
         print(run_.summary())
         print(f"{args.db}: {total} photos in all")

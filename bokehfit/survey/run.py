@@ -6,6 +6,12 @@ in its initializer) and a Dask ``distributed`` cluster. Whichever runs the
 photos, the parent process alone writes: the per-photo JSON and HTML reports
 (atomically, through :mod:`bokehfit.outputs`), then the photo's row, committed
 on its own, as each result arrives.
+
+Stopping: the first Ctrl-C stops handing out photos, keeps every finished
+photo (stored as it arrived) and stops the local workers at once, losing only
+the photos in progress; a second Ctrl-C stops at once. Local workers share the
+parent's process group and die with the parent, so a killed survey leaves no
+worker behind.
 """
 
 from __future__ import annotations
@@ -15,15 +21,18 @@ import concurrent.futures
 import contextlib
 import multiprocessing
 import os
+import signal
 import sys
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from bokehfit.errors import InputError
-from bokehfit.outputs import write_bytes_atomic, write_json
+from bokehfit.outputs import encode_text, write_bytes_atomic, write_json
 from bokehfit.survey.files import content_hash
+from bokehfit.survey.scheduler import check_scheduler
 from bokehfit.survey.store import SurveyStore, reports_folder, row_from_record
 from bokehfit.survey.work import FAILURE_STATUSES, PhotoTask, init_worker, survey_photo
 
@@ -92,7 +101,7 @@ class _Keeper:
             write_json(self.store.path.parent / json_path, document)
             if record.get("html") is not None:
                 html_path = f"{self.folder.name}/{name}.html"
-                write_bytes_atomic(self.store.path.parent / html_path, record["html"].encode("utf-8"))
+                write_bytes_atomic(self.store.path.parent / html_path, encode_text(record["html"]))
         row = row_from_record(record, size_bytes=self.sizes.get(record["sha256"]), json_path=json_path, html_path=html_path)
         self.store.put(row)
         return row["status"]
@@ -134,13 +143,16 @@ class _LocalEngine:
 
     def _new_pool(self):
         # spawn: a fresh interpreter per worker (no threads of the parent's GPU or database inherited)
-        return concurrent.futures.ProcessPoolExecutor(
-            max_workers=self.jobs, mp_context=multiprocessing.get_context("spawn"),
-            initializer=init_worker, initargs=(self.adapter,),
-        )
+        with _sigint_blocked():
+            return concurrent.futures.ProcessPoolExecutor(
+                max_workers=self.jobs, mp_context=multiprocessing.get_context("spawn"),
+                initializer=init_worker, initargs=(self.adapter, True, os.getpid()),
+            )
 
     def submit(self, task: PhotoTask):
-        with _unimportable_main_hidden():  # the pool starts its processes as tasks arrive
+        # the pool starts its processes as tasks arrive: they start with SIGINT blocked, so a
+        # Ctrl-C while one is starting can't stop it with a traceback before it ignores SIGINT
+        with _unimportable_main_hidden(), _sigint_blocked():
             return self.pool.submit(survey_photo, task)
 
     def wait(self, futures):
@@ -155,8 +167,23 @@ class _LocalEngine:
         self.pool.shutdown(wait=False, cancel_futures=True)
         self.pool = self._new_pool()
 
+    def stop(self, futures) -> None:
+        """Stop at once: kill the worker processes (their photos in progress are lost)."""
+        # The pool's processes: no public way to stop them before Python 3.14's kill_workers().
+        processes = list((getattr(self.pool, "_processes", None) or {}).values())
+        for process in processes:
+            with contextlib.suppress(Exception):
+                process.kill()
+        self.pool.shutdown(wait=False, cancel_futures=True)
+        for process in processes:
+            with contextlib.suppress(Exception):
+                process.join(timeout=5.0)
+
     def close(self, interrupted: bool) -> None:
-        self.pool.shutdown(wait=not interrupted, cancel_futures=True)
+        if interrupted:
+            self.stop(())
+        else:
+            self.pool.shutdown(wait=True, cancel_futures=True)
 
 
 class _DaskEngine:
@@ -167,9 +194,11 @@ class _DaskEngine:
 
         self.distributed = distributed
         self.own_client = not isinstance(scheduler, distributed.Client)
+        if self.own_client:
+            check_scheduler(scheduler)  # within a stated timeout, before Dask's own connect (which may wait forever)
         try:
             self.client = distributed.Client(scheduler, timeout=timeout_s) if self.own_client else scheduler
-        except (OSError, TimeoutError, ValueError) as error:
+        except Exception as error:  # noqa: BLE001 - Dask raises many kinds (TLS without its configuration: TypeError)
             raise InputError(f"--scheduler {scheduler!r}: can't reach a Dask scheduler there ({' '.join(str(error).split())})") from None
         self.workers = max(1, sum(self.client.nthreads().values()))
         self.client.run(init_worker, adapter, False)
@@ -188,9 +217,77 @@ class _DaskEngine:
     def restart(self) -> None:
         raise AssertionError("a Dask cluster is never restarted by the survey")
 
+    def stop(self, futures) -> None:
+        """Stop at once: cancel the photos still on the cluster."""
+        with contextlib.suppress(Exception):
+            self.client.cancel(list(futures))
+
     def close(self, interrupted: bool) -> None:
         if self.own_client:
             self.client.close()
+
+
+@contextlib.contextmanager
+def _sigint_blocked():
+    """While inside, SIGINT waits (POSIX, main thread); processes started inside inherit it blocked."""
+    if not hasattr(signal, "pthread_sigmask") or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
+
+class _Stopper:
+    """The survey's SIGINT handler while it runs (main thread, default handler only).
+
+    The first Ctrl-C raises ``KeyboardInterrupt`` in the loop while it waits for
+    results (else as soon as the result in hand is stored), which keeps what is
+    finished and stops the workers; a later one stops the workers at once, wherever
+    the parent is, and raises again.
+    """
+
+    def __init__(self):
+        self.count = 0
+        self.waiting = False  #: the loop waits for results: a first Ctrl-C may raise there
+        self.requested = False  #: a first Ctrl-C came while a result was being stored
+        self.engine = None
+        self.in_flight: dict = {}
+        self.previous = None
+
+    def __enter__(self):
+        if threading.current_thread() is threading.main_thread() and \
+                signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+            self.previous = signal.signal(signal.SIGINT, self._handle)
+        return self
+
+    def __exit__(self, *exc):
+        if self.previous is not None:
+            signal.signal(signal.SIGINT, self.previous)
+        return False
+
+    def _handle(self, signum, frame):
+        self.count += 1
+        if self.count == 1:
+            print("bokehfit: stopping; every finished photo is kept (Ctrl-C again to stop at once)", file=sys.stderr, flush=True)
+            if not self.waiting:
+                self.requested = True
+                return
+        elif self.engine is not None:
+            self.engine.stop(list(self.in_flight))
+        raise KeyboardInterrupt
+
+    def wait(self, engine, futures):
+        """``engine.wait(futures)``, where a first Ctrl-C stops the survey."""
+        if self.requested:
+            raise KeyboardInterrupt
+        self.waiting = True
+        try:
+            return engine.wait(futures)
+        finally:
+            self.waiting = False
 
 
 def run_survey(
@@ -243,7 +340,19 @@ def run_survey(
         run.seconds = time.perf_counter() - started
         return run
 
-    engine = _LocalEngine(jobs, adapter) if scheduler is None else _DaskEngine(scheduler, adapter, connect_timeout_s)
+    with _Stopper() as stopper:
+        try:
+            engine = _LocalEngine(jobs, adapter) if scheduler is None else _DaskEngine(scheduler, adapter, connect_timeout_s)
+        except KeyboardInterrupt:
+            run.interrupted = True
+            run.seconds = time.perf_counter() - started
+            return run
+        stopper.engine = engine
+        return _farm(engine, tasks, keeper, run, stopper, progress, on_result, started)
+
+
+def _farm(engine, tasks, keeper, run, stopper, progress, on_result, started) -> SurveyRun:
+    """Hand the tasks to ``engine`` and keep each result as it arrives, until done or Ctrl-C."""
     bar = None
     if progress if progress is not None else sys.stderr.isatty():
         from tqdm import tqdm
@@ -251,6 +360,7 @@ def run_survey(
         bar = tqdm(total=len(tasks), unit="photo", desc="survey", file=sys.stderr, smoothing=0.1)
     waiting = collections.deque(tasks.values())
     in_flight: dict = {}
+    stopper.in_flight = in_flight
     crashes: collections.Counter = collections.Counter()
     try:
         while waiting or in_flight:
@@ -267,7 +377,7 @@ def run_survey(
                     if in_flight:
                         break
                     engine.restart()
-            for future in engine.wait(in_flight):
+            for future in stopper.wait(engine, in_flight):
                 task = in_flight.pop(future)
                 try:
                     record = future.result()
@@ -277,7 +387,8 @@ def run_survey(
                         # every task of the broken pool failed with it: those that ran may be the cause
                         for other in [task, *in_flight.values()]:
                             crashes[other.sha256] += 1
-                        lost, in_flight = [task, *in_flight.values()], {}
+                        lost = [task, *in_flight.values()]
+                        in_flight.clear()
                         for other in reversed(lost):
                             if crashes[other.sha256] >= MAX_WORKER_CRASHES:
                                 record = _failure(other, "error", "the worker process died while surveying this photo")
@@ -298,8 +409,15 @@ def run_survey(
                     bar.set_postfix_str(", ".join(f"{s} {n}" for s, n in sorted(run.statuses.items())), refresh=False)
     except KeyboardInterrupt:
         run.interrupted = True
-        for future in in_flight:
-            future.cancel()
+        # the photos already back are kept; those in progress are dropped with their workers
+        finished = [future for future in in_flight if future.done() and not future.cancelled()]
+        engine.stop(list(in_flight))
+        for future in finished:
+            with contextlib.suppress(Exception):
+                record = future.result()
+                run.statuses[keeper.keep(record)] += 1
+                run.done += 1
+        in_flight.clear()
     finally:
         if bar is not None:
             bar.close()

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import signal
+import sys
 import tempfile
 import threading
 import time
@@ -16,7 +17,7 @@ import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
-__all__ = ["PhotoTask", "FAILURE_STATUSES", "STATUSES", "init_worker", "survey_photo", "THUMBNAIL_PX"]
+__all__ = ["PhotoTask", "FAILURE_STATUSES", "STATUSES", "init_worker", "survey_photo", "THUMBNAIL_PX", "PARENT_CHECK_S"]
 
 #: Statuses of a survey row besides compare's (design.md §7b): the file could not be read as a
 #: photo, compare raised (a bug or a lost GPU), or it ran past the per-photo time limit.
@@ -48,14 +49,51 @@ class PhotoTimeout(Exception):
     """A photo ran past its time limit."""
 
 
-def init_worker(adapter=None, ignore_sigint: bool = True) -> None:
+#: How often a local worker checks that its parent is alive (seconds), where the kernel can't tell it.
+PARENT_CHECK_S = 0.5
+
+
+def _die_with(parent_pid: int) -> None:
+    """End this process when the process ``parent_pid`` (its parent) ends, however it ends.
+
+    Linux sends SIGKILL at the parent's death (``PR_SET_PDEATHSIG``); elsewhere, and
+    for a parent that died before that was set, a daemon thread checks the parent.
+    """
+    if os.getppid() != parent_pid:
+        os._exit(1)
+    if sys.platform.startswith("linux"):
+        try:
+            import ctypes
+
+            PR_SET_PDEATHSIG = 1  # <linux/prctl.h>
+            ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0)
+        except (OSError, AttributeError):
+            pass
+        if os.getppid() != parent_pid:  # died before the kernel was told
+            os._exit(1)
+
+    def watch():
+        while os.getppid() == parent_pid:
+            time.sleep(PARENT_CHECK_S)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="bokehfit-parent-watch", daemon=True).start()
+
+
+def init_worker(adapter=None, ignore_sigint: bool = True, parent_pid: int | None = None) -> None:
     """Per-process start-up: import bokehfit's pipeline and open the GPU once.
 
     In a local pool the worker also ignores SIGINT: Ctrl-C reaches the whole
-    process group and the parent alone decides what stops.
+    process group and the parent alone decides what stops (it starts the worker
+    with SIGINT blocked, unblocked here once ignored). With ``parent_pid`` the
+    worker ends when that process ends, so a killed survey leaves no worker behind.
     """
     if ignore_sigint and threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGINT, signal.SIG_IGN)
+        if hasattr(signal, "pthread_sigmask"):
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+    if parent_pid is not None:
+        _die_with(parent_pid)
     import bokehfit.compare  # noqa: F401  (the pipeline, imported once per process)
     import bokehfit.report.html  # noqa: F401
     from bokehfit.errors import GPUUnavailableError
