@@ -35,7 +35,9 @@ from bokehfit.metrics.outlines import resample
 from bokehfit.optics import (
     LENS_MODELS,
     SIZE_CONVENTIONS,
+    check_fitted_fstop,
     circumscribed_fstop,
+    focus_problem,
     fstop_from_coc,
     light_distance_from_coc,
     pixel_pitch_mm,
@@ -515,12 +517,13 @@ def estimate_fstop(
         flags = ", ".join("--" + name.replace("_", "-") for name in missing)
         return FStop(None, None, f"unknown {', '.join(missing)} (give {flags})", convention, lens_model, exif_fnumber=exif_n)
     f, focus = geometry.focal_length_mm, geometry.focus_distance_m
-    if focus * 1000.0 <= f:
+    problem = focus_problem(f, focus)
+    if problem:
         if "command line" in (geometry.sources.get("focus_distance_m"), geometry.sources.get("focal_length_mm")):
-            raise InputError(f"--focus-distance-m ({focus:g} m) must be longer than the focal length ({f:g} mm): "
-                             "nothing can be focused closer")
-        return FStop(None, None, f"the focus distance ({focus:g} m, {geometry.sources.get('focus_distance_m')}) is not longer "
-                     f"than the focal length ({f:g} mm): give --focus-distance-m", convention, lens_model, exif_fnumber=exif_n)
+            raise InputError(f"--focus-distance-m: {problem}")
+        return FStop(None, None, f"{problem} ({geometry.sources.get('focus_distance_m')}, "
+                     f"{geometry.sources.get('focal_length_mm')}): the metadata is ignored; give --focus-distance-m",
+                     convention, lens_model, exif_fnumber=exif_n)
     pitch = pixel_pitch_mm(geometry.sensor_width_mm, photo.width, photo.height)
     relative = fit.diameter_uncertainty_px / fit.diameter_px if fit.diameter_px else 0.0
     coc = fit.diameter_px * pitch
@@ -535,6 +538,7 @@ def estimate_fstop(
                 bound = "upper"
                 meaning = ("the lights' distance is unknown: this is the f-stop for lights at infinity; lights behind the "
                            "focus plane at any finite distance give a smaller f-stop (give --light-distance-m)")
+        check_fitted_fstop(value)  # an f-stop no lens has is not a result: the geometry behind it is wrong
     except InputError as error:
         return FStop(None, None, str(error), convention, lens_model, exif_fnumber=exif_n)
     focus_range = photo.exif.focus_distance_range_m

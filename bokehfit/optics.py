@@ -27,10 +27,13 @@ import math
 
 from bokehfit.apertures import Aperture
 from bokehfit.errors import InputError
-from bokehfit.validate import check
+from bokehfit.validate import RANGES, check
 
 __all__ = [
     "LENS_MODELS",
+    "MAX_MAGNIFICATION",
+    "check_fitted_fstop",
+    "focus_problem",
     "SIZE_CONVENTIONS",
     "coc_mm",
     "fstop_from_coc",
@@ -43,16 +46,57 @@ LENS_MODELS = ("thin", "pinhole")
 SIZE_CONVENTIONS = ("equal-area", "circumscribed")
 
 
+#: Largest magnification m = f / (d_f − f) of a focused subject: the strongest camera macro lenses
+#: reach 5× (Canon MP-E 65 mm); 10× leaves room. A focus distance nearer than f·(1 + 1/10) is no lens's.
+MAX_MAGNIFICATION = 10.0
+
+
+def focus_problem(focal_length_mm: float, focus_distance_m: float) -> str | None:
+    """Why a focus distance can't go with a focal length (in words), or None when it can.
+
+    The thin lens focuses a subject at d_f with magnification ``f / (d_f − f)``; beyond
+    :data:`MAX_MAGNIFICATION` (d_f within 10 % of f) no camera lens focuses, and the
+    f-stop that follows would be absurd (f/55,834,718 for 10000 mm focused at 10.001 m).
+    """
+    f, focus = float(focal_length_mm), float(focus_distance_m) * 1000.0
+    if focus <= f:
+        return (f"the focus distance ({focus / 1000:g} m) is not longer than the focal length ({f:g} mm): "
+                "nothing can be focused closer")
+    magnification = f / (focus - f)
+    if magnification > MAX_MAGNIFICATION:
+        return (f"the focus distance ({focus / 1000:g} m) with the focal length ({f:g} mm) is a magnification of "
+                f"{magnification:.3g}×, beyond any camera lens (at most {MAX_MAGNIFICATION:g}×)")
+    return None
+
+
 def _check_geometry(focal_length_mm: float, focus_distance_m: float, light_distance_m: float) -> tuple[float, float, float]:
     f = check("focal_length_mm", focal_length_mm)
     focus = check("focus_distance_m", focus_distance_m) * 1000.0
     light = check("light_distance_m", light_distance_m)
-    if focus <= f:
-        raise InputError(
-            f"focus distance ({focus / 1000:g} m) must be longer than the focal length ({f:g} mm): "
-            "nothing can be focused closer"
-        )
+    problem = focus_problem(f, focus / 1000.0)
+    if problem:
+        raise InputError(problem)
+    if light * 1000.0 <= f:
+        raise InputError(f"the lights' distance ({light:g} m) must be longer than the focal length ({f:g} mm): "
+                         "a light nearer than that makes no image on the sensor")
     return f, focus, light * 1000.0
+
+
+def check_fitted_fstop(value: float) -> float:
+    """``value``, an f-stop that a fit implies, or ``InputError`` saying why it can't be a lens's.
+
+    The range is ``RANGES["fitted_fstop"]``: outside it the geometry behind the number
+    (focal length, focus distance, sensor width, the lights' distance) is wrong, and the
+    number must not be reported as a result.
+    """
+    rule = RANGES["fitted_fstop"]
+    if not rule.contains(value):
+        shown = f"{value:.3g}" if math.isfinite(value) else str(value)
+        raise InputError(
+            f"the discs' size implies f/{shown}, outside the range of real lenses (f/{rule.low:g} to f/{rule.high:g}): "
+            "the focal length, focus distance, sensor width or lights' distance is wrong"
+        )
+    return value
 
 
 def _defocus_factor(f: float, focus: float, light: float, lens_model: str) -> float:

@@ -37,12 +37,14 @@ interrupt a write at a known moment. It changes nothing else.
 from __future__ import annotations
 
 import contextlib
+import errno
 import io
 import json
 import os
 import re
 import secrets
 import signal
+import stat
 import struct
 import threading
 import time
@@ -61,9 +63,14 @@ __all__ = [
     "KERNEL_FORMATS",
     "WRITE_PAUSE_ENV",
     "check_output_path",
+    "file_kind",
+    "make_folder",
+    "open_regular",
     "check_replaceable",
+    "encode_text",
     "is_bokehfit_output",
     "remove_stale_temporaries",
+    "replace_surrogates",
     "write_atomic",
     "write_bytes_atomic",
     "write_exr",
@@ -225,9 +232,41 @@ _PARQUET_MAGIC = b"PAR1"
 _PARQUET_FOOTER_MAX_BYTES = 1 << 20
 
 
+def open_regular(path: str | os.PathLike):
+    """``path`` opened for reading in binary, or ``OSError`` if it is not a regular file.
+
+    The file is opened with ``O_NONBLOCK`` and checked with ``fstat`` before a byte is
+    read: opening a FIFO this way returns at once (a plain ``open`` waits for a writer),
+    and a FIFO, a device (``/dev/zero``), a socket or a folder is refused, symbolic links
+    to them included. Every file bokehfit reads without knowing what it is goes through
+    here (an output it may replace, a list of photos, a photo it hashes).
+    """
+    flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOCTTY", 0) | getattr(os, "O_BINARY", 0)
+    descriptor = os.open(path, flags)
+    try:
+        mode = os.fstat(descriptor).st_mode
+        if not stat.S_ISREG(mode):
+            raise OSError(errno.EINVAL, f"not a regular file ({file_kind(mode)})", str(path))
+        if hasattr(os, "set_blocking"):
+            os.set_blocking(descriptor, True)
+        return os.fdopen(descriptor, "rb")
+    except BaseException:
+        os.close(descriptor)
+        raise
+
+
+def file_kind(mode: int) -> str:
+    """What a ``st_mode`` is, in words: ``a FIFO``, ``a character device``, ..."""
+    for test, words in ((stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a character device"),
+                        (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"), (stat.S_ISREG, "a regular file")):
+        if test(mode):
+            return words
+    return "not a regular file"
+
+
 def _parquet_is_ours(path: str | os.PathLike) -> bool:
     """The footer's key-value metadata (uncompressed Thrift) holds the key ``bokehfit_version``."""
-    with open(path, "rb") as file:
+    with open_regular(path) as file:
         if not file.read(4) == _PARQUET_MAGIC:
             return False
         size = file.seek(0, os.SEEK_END)
@@ -265,7 +304,7 @@ def is_bokehfit_output(path: str | os.PathLike) -> bool:
             return _FOOTER_RECOGNISERS[suffix](path)
         if recognise is None:
             return False
-        with open(path, "rb") as file:
+        with open_regular(path) as file:
             return recognise(file.read(_HEAD_BYTES))
     except OSError:
         return False
@@ -274,29 +313,67 @@ def is_bokehfit_output(path: str | os.PathLike) -> bool:
 def check_replaceable(path: str | os.PathLike) -> None:
     """``InputError`` if something that bokehfit did not write is at ``path``; nothing if it is free or ours."""
     path = Path(path)
-    if path.is_dir():
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        mode = None  # missing (or a dangling link: refused below, as another's file)
+    if mode is not None and stat.S_ISDIR(mode):
         raise InputError(f"output {str(path)!r} is a folder")
+    if mode is not None and not stat.S_ISREG(mode):
+        raise InputError(f"output {str(path)!r} is {file_kind(mode)}, not a regular file; choose a file name")
     if os.path.lexists(path) and not is_bokehfit_output(path):
         raise InputError(
             f"output {str(path)!r} already exists and was not written by bokehfit; move it away or choose another name"
         )
 
 
-def check_output_path(path: str | os.PathLike, suffixes: Iterable[str], inputs: Iterable[str | os.PathLike] = ()) -> Path:
-    """``path`` as a Path, or ``InputError`` if it can't be written, names an input or holds a file not ours."""
+def check_output_path(
+    path: str | os.PathLike, suffixes: Iterable[str], inputs: Iterable[str | os.PathLike] = (), *, folder_may_be_missing: bool = False
+) -> Path:
+    """``path`` as a Path, or ``InputError`` if it can't be written, names an input or holds a file not ours.
+
+    Nothing is created or opened for writing here: with ``folder_may_be_missing`` a missing
+    folder is accepted where it could be made (its nearest existing parent is a folder), and
+    the writer makes it (:func:`make_folder`) only when it writes, so a run that fails first
+    leaves no folder behind. Stale temporary files of killed bokehfit processes in the
+    folder are removed (:func:`remove_stale_temporaries`).
+    """
     path = Path(path)
     suffixes = tuple(suffixes)
     if path.suffix.lower() not in suffixes:
         raise InputError(f"output file must end in {', '.join(suffixes)} (got {str(path)!r})")
     if not path.parent.is_dir():
-        raise InputError(f"output folder {str(path.parent)!r} does not exist")
+        if not folder_may_be_missing:
+            raise InputError(f"output folder {str(path.parent)!r} does not exist")
+        _check_folder_can_be_made(path.parent)
+        return path
     if path.is_dir():
         raise InputError(f"output {str(path)!r} is a folder")
     for source in inputs:
         if Path(source).exists() and path.exists() and path.samefile(source):
             raise InputError(f"output {str(path)!r} would overwrite the input; choose another name")
     check_replaceable(path)
+    remove_stale_temporaries(path.parent)
     return path
+
+
+def _check_folder_can_be_made(folder: Path) -> None:
+    """``InputError`` unless the nearest existing parent of the missing ``folder`` is a folder."""
+    parent = folder
+    while not os.path.lexists(parent) and parent != parent.parent:
+        parent = parent.parent
+    if not parent.is_dir():
+        raise InputError(f"output folder {str(folder)!r} can't be made: {str(parent)!r} is not a folder")
+
+
+def make_folder(folder: str | os.PathLike) -> Path:
+    """Create an output folder (and its parents) if missing; ``InputError`` if that fails."""
+    folder = Path(folder)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise InputError(f"cannot create the output folder {str(folder)!r}: {error.strerror or error}") from None
+    return folder
 
 
 # --------------------------------------------------------------------------------------
@@ -319,20 +396,63 @@ def _process_running(pid: int) -> bool:
     return True
 
 
+def _process_started_at(pid: int) -> float | None:
+    """When process ``pid`` started (seconds since the epoch), where the system says (Linux); else None."""
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as file:
+            fields = file.read().rsplit(b")", 1)[1].split()
+        with open("/proc/stat", "rb") as file:
+            boot = next(float(line.split()[1]) for line in file if line.startswith(b"btime "))
+        return boot + int(fields[19]) / os.sysconf("SC_CLK_TCK")  # field 22 of stat: start time in clock ticks
+    except (OSError, ValueError, IndexError, StopIteration):
+        return None
+
+
+#: Slack (seconds) when comparing a process's start with a file's time: /proc/stat's boot time is whole seconds.
+_CLOCK_SLACK_S = 2.0
+
+
+def _temporary_is_stale(path: str, pid: int) -> bool:
+    """Whether the temporary file ``path`` named for process ``pid`` belongs to no running process.
+
+    It does when no process ``pid`` runs, or when the process now called ``pid`` started after
+    the file was last written (the writer was killed and its number given to another process).
+    """
+    if not _process_running(pid):
+        return True
+    if pid == os.getpid():
+        return False
+    started = _process_started_at(pid)
+    try:
+        written = os.lstat(path).st_mtime
+    except OSError:
+        return False
+    return started is not None and started > written + _CLOCK_SLACK_S
+
+
 def remove_stale_temporaries(folder: str | os.PathLike) -> list[Path]:
-    """Remove the temporary files that killed bokehfit processes left in ``folder``; returns them."""
+    """Remove the temporary files that killed bokehfit processes left in ``folder``; returns them.
+
+    Only files of bokehfit's own naming (``.NAME.bokehfit-tmp-PID-TOKEN.SUFFIX``) that are
+    regular files and belong to no running process (:func:`_temporary_is_stale`) are removed.
+    """
     removed = []
     try:
-        entries = list(os.scandir(folder))
+        with os.scandir(folder) as scan:
+            entries = [entry for entry, _ in zip(scan, range(_SCAN_MAX_ENTRIES))]
     except OSError:
         return removed
     for entry in entries:
         match = _TEMPORARY.match(entry.name)
-        if match and entry.is_file(follow_symlinks=False) and not _process_running(int(match["pid"])):
+        if match and entry.is_file(follow_symlinks=False) and _temporary_is_stale(entry.path, int(match["pid"])):
             with contextlib.suppress(OSError):
                 os.unlink(entry.path)
                 removed.append(Path(entry.path))
     return removed
+
+
+#: Most entries of one folder looked at for stale temporary files (a folder of a million files is not scanned whole).
+_SCAN_MAX_ENTRIES = 100_000
 
 
 def _new_temporary(path: Path) -> Path:
@@ -398,6 +518,26 @@ def write_atomic(path: str | os.PathLike, write: Callable[[Path], None]) -> None
         except BaseException:
             temporary.unlink(missing_ok=True)
             raise
+
+
+def encode_text(text: str) -> bytes:
+    """``text`` as UTF-8, where characters UTF-8 can't hold become U+FFFD.
+
+    A file name that is not valid UTF-8 reaches Python as lone surrogates (PEP 383);
+    written into a page or a report they would make the whole text unencodable.
+    """
+    try:
+        return text.encode("utf-8")
+    except UnicodeEncodeError:
+        return replace_surrogates(text).encode("utf-8")
+
+
+def replace_surrogates(text: str) -> str:
+    """``text`` with every lone surrogate (an undecodable byte of a file name, PEP 383) made U+FFFD."""
+    return _SURROGATE.sub("\ufffd", text)
+
+
+_SURROGATE = re.compile("[\ud800-\udfff]")
 
 
 def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> None:

@@ -71,6 +71,7 @@ RANGES: dict[str, Range] = {
     "focal_length_mm": Range(1.0, 10000.0, "mm", "phone lenses (about 2 mm) to the longest telescope lenses used as camera lenses"),
     "sensor_width_mm": Range(1.0, 300.0, "mm", "the smallest phone sensors to 8×10-inch film (254 mm)"),
     "fstop": Range(0.1, 10000.0, "", "below f/0.1 the aperture is wider than any scene; above f/10000 the lens is a pinhole"),
+    "fitted_fstop": Range(0.5, 1000.0, "", "the fastest camera lenses are about f/0.7; pinhole cameras reach f/500: a fit outside is wrong geometry"),
     "focus_distance_m": Range(1e-3, 1e6, "m", "1 mm (macro) to 1000 km; beyond, float32 rays lose the focus plane"),
     "light_distance_m": Range(
         0.0, 1e20, "m", "anywhere in front of the lens (a star is 1e16 m away); inf for a light at infinity", low_open=True, allow_inf=True

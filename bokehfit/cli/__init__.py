@@ -114,9 +114,24 @@ def entry_point() -> None:
     Warnings are printed as one line while the command runs; the process's
     warning handler and filters are restored afterwards (also on exit).
     """
+    _unencodable_text_escaped()
     with warnings.catch_warnings():
         warnings.showwarning = _show_warning_one_line
         _run_with_exit_codes()
+
+
+def _unencodable_text_escaped() -> None:
+    """stdout and stderr write what their encoding can't hold as backslash escapes instead of failing.
+
+    A file name that is not valid UTF-8 (lone surrogates in Python) or a "×" on an ASCII
+    terminal would otherwise end a finished run with an encoding error while it prints.
+    """
+    for stream in (sys.stdout, sys.stderr):
+        if hasattr(stream, "reconfigure") and getattr(stream, "errors", None) == "strict":
+            try:
+                stream.reconfigure(errors="backslashreplace")
+            except (ValueError, OSError):
+                pass
 
 
 def _run_with_exit_codes() -> None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from bokehfit.outputs import check_output_path, write_bytes_atomic, write_json
+from bokehfit.outputs import check_output_path, encode_text, write_bytes_atomic, write_json
 
 __all__ = ["add_parser", "run"]
 
@@ -77,6 +77,6 @@ def run(args: argparse.Namespace) -> dict:
         write_json(json_path, result)
         print(f"wrote {json_path}")
     if html_path:
-        write_bytes_atomic(html_path, build_html(result).encode("utf-8"))
+        write_bytes_atomic(html_path, encode_text(build_html(result)))
         print(f"wrote {html_path}")
     return result

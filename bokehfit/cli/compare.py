@@ -19,7 +19,7 @@ from bokehfit.discs import COMPARE_MIN_DIAMETER_PX, DEFAULT_MAX_DIAMETER_PX, DEF
 from bokehfit.errors import InputError, NoResultError, check_positive
 from bokehfit.fit import FOCUS_SIDES
 from bokehfit.optics import LENS_MODELS, SIZE_CONVENTIONS
-from bokehfit.outputs import check_output_path, write_bytes_atomic, write_json
+from bokehfit.outputs import check_output_path, encode_text, make_folder, write_bytes_atomic, write_json
 from bokehfit.validate import arg_type
 
 __all__ = ["add_parser", "run", "summary"]
@@ -103,29 +103,22 @@ class _Progress:
             self.bar.close()
 
 
-def _make_folder(folder: Path) -> None:
-    """Create an output folder (and its parents) if it is missing."""
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except OSError as error:
-        raise InputError(f"cannot create the output folder {str(folder)!r}: {error.strerror}") from None
-
-
 def _output_paths(args: argparse.Namespace) -> tuple[Path | None, Path | None]:
-    """The JSON and the HTML report to write (None where not asked for), checked before the work."""
+    """The JSON and the HTML report to write (None where not asked for), checked before the work.
+
+    Missing folders are made only when the outputs are written (a refused photo leaves none).
+    """
     json_path = html_path = None
     stem = Path(args.photo).stem
     if args.json:
-        _make_folder(Path(args.json).parent)
-        json_path = check_output_path(args.json, (".json",), inputs=[args.photo])
+        json_path = check_output_path(args.json, (".json",), inputs=[args.photo], folder_may_be_missing=True)
         stem = json_path.stem
     elif args.out_dir:
-        _make_folder(Path(args.out_dir))
-        json_path = check_output_path(Path(args.out_dir) / f"{stem}.json", (".json",), inputs=[args.photo])
+        json_path = check_output_path(Path(args.out_dir) / f"{stem}.json", (".json",), inputs=[args.photo],
+                                      folder_may_be_missing=True)
     if not args.no_html and json_path is not None:
         folder = Path(args.out_dir) if args.out_dir else json_path.parent
-        _make_folder(folder)
-        html_path = check_output_path(folder / f"{stem}.html", (".html",), inputs=[args.photo])
+        html_path = check_output_path(folder / f"{stem}.html", (".html",), inputs=[args.photo], folder_may_be_missing=True)
     return json_path, html_path
 
 
@@ -157,12 +150,14 @@ def run(args: argparse.Namespace) -> Comparison:
     command_line = args.command_line
     print(summary(comparison))
     if json_path:
+        make_folder(json_path.parent)
         write_json(json_path, comparison.to_json(command_line))
         print(f"wrote {json_path}")
     if html_path:
         from bokehfit.report.html import build_html
 
-        write_bytes_atomic(html_path, build_html(comparison, command_line).encode("utf-8"))
+        make_folder(html_path.parent)
+        write_bytes_atomic(html_path, encode_text(build_html(comparison, command_line)))
         print(f"wrote {html_path}")
     if json_path is None:
         print("no files written (give --json OUT.json or --out-dir DIR for the JSON and the HTML report)")

@@ -68,7 +68,8 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--jobs", type=_jobs, default=None,
                         help="worker processes on this machine (default: the usable CPU cores)")
     parser.add_argument("--scheduler", metavar="ADDRESS",
-                        help="run on a Dask cluster, e.g. tcp://10.0.0.5:8786 (see `dask scheduler`, `dask worker`)")
+                        help="run on a Dask cluster, e.g. tcp://10.0.0.5:8786 (see `dask scheduler`, `dask worker`); "
+                             "it must answer within 10 s")
     parser.add_argument("--timeout-s", type=_seconds, default=DEFAULT_TIMEOUT_S,
                         help=f"per-photo limit in seconds, past which the photo is a timeout row (default {DEFAULT_TIMEOUT_S:g}; "
                              "local workers only)")
@@ -134,6 +135,10 @@ def run(args: argparse.Namespace):
                 check_output_path(value, (suffix,), inputs=[args.db])
             except InputError as error:
                 raise InputError(f"{option}: {error}") from None
+    if args.scheduler:
+        from bokehfit.survey.scheduler import check_scheduler
+
+        check_scheduler(args.scheduler)  # before any photo is hashed or the database is made
     run_ = None
     if args.paths or args.files_from:
         prepared = prepare_survey(args.paths, files_from=args.files_from, jobs=args.jobs, timeout_s=args.timeout_s,

@@ -85,6 +85,9 @@ __all__ = [
     "FLOAT_SAMPLE_MAX",
     "FLOAT_WHITE_MAX",
     "METADATA_MAX_BYTES",
+    "METADATA_INFLATE_BUDGET_BYTES",
+    "JPEG_MAX_PIXELS_PER_BYTE",
+    "DEFLATE_MAX_RATIO",
     "MIN_SIDE_PX",
     "MAX_PIXELS",
     "PROGRESS_MIN_PIXELS",
@@ -107,6 +110,17 @@ _BLOCK_ROWS = 64
 #: Largest metadata block read (bytes, after decompression): an ICC profile or an EXIF block.
 #: Real ones are a few kB to a few hundred kB; larger ones are skipped with a note.
 METADATA_MAX_BYTES = 4 << 20
+#: Most bytes inflated from all the metadata chunks of one file together (ICC profile, XMP): a file of
+#: ten thousand compressed chunks costs no more than a few legitimate ones; past it, the rest is skipped.
+METADATA_INFLATE_BUDGET_BYTES = 4 * METADATA_MAX_BYTES
+#: Most pixels a JPEG may claim per byte of the file. Every 8×8 block of the luminance is coded in
+#: the first (DC) scan with at least one bit (Huffman codes are 1 to 16 bits long, ITU T.81 C), so
+#: a Huffman-coded JPEG of B bytes holds at most 8·B blocks, 512·B pixels. Arithmetic-coded and lossless
+#: JPEGs are held to the same bound: a photo's sensor noise costs far more than a bit per block.
+JPEG_MAX_PIXELS_PER_BYTE = 512
+#: Largest ratio of deflate: one length code (≥ 1 bit) and one distance code (≥ 1 bit) repeat at
+#: most 258 bytes, so 2 bits give at most 258 bytes (RFC 1951 §3.2.5): 1032 bytes per byte.
+DEFLATE_MAX_RATIO = 1032
 #: Float TIFFs whose robust white point (99.9th percentile of the luminance) is above this are
 #: taken to be in other units and scaled so that it is 1 (linear float files put white at 1.0;
 #: HDR merges reach a few hundred).
@@ -631,6 +645,8 @@ class _Meta:
     png_srgb: bool = False
     png_gamma: float | None = None
     notes: list[str] = field(default_factory=list)
+    bits_per_pixel: int = 24  #: PNG: bit depth × channels
+    image_data_bytes: int = 0  #: PNG: the IDAT chunks' total length
 
 
 def _jpeg_header(name: str, data: bytes) -> tuple[_Meta, int]:
@@ -695,6 +711,12 @@ def _load_jpeg(path: Path, data: bytes, max_pixels: int, progress: bool) -> Phot
     if meta.width == 0 or meta.height == 0:
         raise InputError(f"{path.name} is a JPEG file that gives no image size; re-export it")
     _check_size(path.name, meta.width, meta.height, max_pixels)
+    blocks = math.ceil(meta.width / 8) * math.ceil(meta.height / 8)
+    if blocks > 8 * len(data):  # at least one bit per 8×8 block of the luminance (JPEG_MAX_PIXELS_PER_BYTE)
+        raise InputError(
+            f"{path.name}: its header claims {meta.width}×{meta.height} px, which {len(data)} bytes of JPEG can't hold "
+            f"(at most {JPEG_MAX_PIXELS_PER_BYTE} px a byte); the file is truncated or crafted: copy or export it again"
+        )
     if components not in (1, 3, 4):
         raise InputError(f"{path.name} is a {components}-channel JPEG; convert it to RGB")
     exif = build_exif(meta.exif, meta.xmp, width_px=meta.width, height_px=meta.height)
@@ -814,6 +836,8 @@ def _png_header(name: str, data: bytes) -> _Meta:
     truncated = f"{name} is a truncated PNG file (it ends before its IEND chunk); copy or export it again"
     i, n = 8, len(data)
     first = True
+    budget = _InflateBudget(METADATA_INFLATE_BUDGET_BYTES)
+    icc_seen = False
     while True:
         if i + 8 > n:
             raise InputError(truncated)
@@ -832,11 +856,17 @@ def _png_header(name: str, data: bytes) -> _Meta:
             if kind != b"IHDR" or length < 13:
                 raise InputError(f"{name} is a damaged PNG file (no IHDR chunk); re-export it")
             meta.width, meta.height = struct.unpack(">II", body[:8])
+            meta.bits_per_pixel = body[8] * _PNG_CHANNELS.get(body[9], 4)
             first = False
+        elif kind == b"IDAT":
+            meta.image_data_bytes += length
+        elif kind == b"iCCP" and wanted and icc_seen:
+            budget.skipped += 1  # the PNG standard allows one; the first counts
         elif kind == b"iCCP" and wanted:
+            icc_seen = True
             try:
                 separator = body.index(b"\x00")
-                meta.icc = _inflate(body[separator + 2 :], METADATA_MAX_BYTES)
+                meta.icc = budget.inflate(body[separator + 2 :], METADATA_MAX_BYTES)
             except (ValueError, zlib.error):
                 meta.icc = None
             if meta.icc is None and length:
@@ -847,15 +877,55 @@ def _png_header(name: str, data: bytes) -> _Meta:
             meta.png_gamma = struct.unpack(">I", body)[0] / 100000.0 or None
         elif kind == b"eXIf" and wanted:
             exif_blob = body
+        elif kind == b"iTXt" and body.startswith(b"XML:com.adobe.xmp\x00") and meta.xmp is not None:
+            budget.skipped += 1
         elif kind == b"iTXt" and body.startswith(b"XML:com.adobe.xmp\x00"):
-            meta.xmp = _itxt_text(body, XMP_MAX_BYTES)
+            meta.xmp = _itxt_text(body, XMP_MAX_BYTES, budget)
             if meta.xmp is None:
                 meta.notes.append(f"{name}: its XMP packet is damaged or inflates past {XMP_MAX_BYTES} bytes; ignored")
         elif kind == b"IEND":
             break
         i += 12 + length
+    if budget.skipped:
+        meta.notes.append(f"{name}: {budget.skipped} more ICC or XMP chunks than the one of each a PNG may hold, or past the"
+                          f" {METADATA_INFLATE_BUDGET_BYTES} bytes inflated per file; skipped")
     meta.exif = read_exif_tags(exif_blob)
     return meta
+
+
+#: Channels of each PNG colour type (grey, RGB, palette, grey + alpha, RGBA).
+_PNG_CHANNELS = {0: 1, 2: 3, 3: 1, 4: 2, 6: 4}
+
+
+class _InflateBudget:
+    """The bytes that one file's metadata chunks may inflate to, all together."""
+
+    def __init__(self, total: int):
+        self.left, self.skipped = total, 0
+
+    def inflate(self, data: bytes, cap: int) -> bytes | None:
+        """:func:`_inflate` within what is left; a chunk past the budget is skipped (None) and counted."""
+        if self.left <= 0:
+            self.skipped += 1
+            return None
+        out = _inflate(data, min(cap, self.left))
+        self.left -= min(cap, self.left) if out is None else len(out)
+        return out
+
+
+def _check_png_data_size(name: str, meta: "_Meta") -> None:
+    """``InputError`` if the image data claimed by the header can't come out of the file's IDAT bytes.
+
+    Unfiltered rows are ``height × (1 + ⌈width × bits per pixel / 8⌉)`` bytes, and deflate gives at most
+    :data:`DEFLATE_MAX_RATIO` bytes per byte; the zlib header and Adam7's extra filter bytes get a margin.
+    """
+    raw = meta.height * (1 + math.ceil(meta.width * meta.bits_per_pixel / 8))
+    if raw > DEFLATE_MAX_RATIO * (meta.image_data_bytes + 64) + 16 * meta.height:
+        raise InputError(
+            f"{name}: its header claims {meta.width}×{meta.height} px, which {meta.image_data_bytes} bytes of PNG image"
+            f" data can't hold (deflate packs at most {DEFLATE_MAX_RATIO} bytes a byte); the file is truncated or crafted:"
+            " copy or export it again"
+        )
 
 
 def _inflate(data: bytes, cap: int) -> bytes | None:
@@ -869,7 +939,7 @@ def _inflate(data: bytes, cap: int) -> bytes | None:
     return None if len(out) > cap else out
 
 
-def _itxt_text(body: bytes, cap: int) -> bytes | None:
+def _itxt_text(body: bytes, cap: int, budget: "_InflateBudget | None" = None) -> bytes | None:
     """The text of an iTXt chunk (decompressed up to ``cap`` bytes), or None."""
     try:
         keyword_end = body.index(b"\x00")
@@ -877,7 +947,9 @@ def _itxt_text(body: bytes, cap: int) -> bytes | None:
         rest = body[keyword_end + 3 :]
         rest = rest[rest.index(b"\x00") + 1 :]  # language tag
         rest = rest[rest.index(b"\x00") + 1 :]  # translated keyword
-        return _inflate(rest, cap) if compressed else rest
+        if not compressed:
+            return rest
+        return budget.inflate(rest, cap) if budget is not None else _inflate(rest, cap)
     except (ValueError, IndexError, zlib.error):
         return None
 
@@ -885,6 +957,7 @@ def _itxt_text(body: bytes, cap: int) -> bytes | None:
 def _load_png(path: Path, data: bytes, max_pixels: int, progress: bool) -> Photo:
     meta = _png_header(path.name, data)
     _check_size(path.name, meta.width, meta.height, max_pixels)
+    _check_png_data_size(path.name, meta)
     exif = build_exif(meta.exif, meta.xmp, width_px=meta.width, height_px=meta.height)
     encoding = _encoding_for(meta)
     bar = _progress_for(path.name, meta.width, meta.height, exif.orientation, progress)

@@ -61,7 +61,9 @@ def draw_disc_overlay(
     scale = 1.0
     if max_side is not None and max(canvas.shape[:2]) > max_side:
         scale = max_side / max(canvas.shape[:2])
-        canvas = cv2.resize(canvas, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+        # each side at least a pixel: a 16 × 100000 photo shrinks to 1 × 6144, not to nothing
+        size = (max(1, round(canvas.shape[1] * scale)), max(1, round(canvas.shape[0] * scale)))
+        canvas = cv2.resize(canvas, size, interpolation=cv2.INTER_AREA)
     height, width = canvas.shape[:2]
     thickness = max(1, round(max(height, width) / 1000))
     # FONT_HERSHEY_SIMPLEX is about 22 px tall at scale 1.

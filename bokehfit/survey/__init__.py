@@ -182,14 +182,14 @@ def survey_table(db: str | os.PathLike):
 
 def write_report(db: str | os.PathLike, report: str | os.PathLike, *, command_line: str = "") -> Path:
     """Write the lens fingerprint page (:mod:`bokehfit.survey.report`) of a survey database, atomically."""
-    from bokehfit.outputs import check_output_path, write_bytes_atomic
+    from bokehfit.outputs import check_output_path, encode_text, write_bytes_atomic
     from bokehfit.survey.report import build_report
 
     path = check_output_path(report, (".html",), inputs=[db])
     with SurveyStore(db, read_only=True) as store:
         rows, thumbnails = store.table().to_pylist(), store.thumbnails()
     page = build_report(rows, thumbnails, report_path=path, db_path=db, command_line=command_line)
-    write_bytes_atomic(path, page.encode("utf-8"))
+    write_bytes_atomic(path, encode_text(page))
     return path
 
 

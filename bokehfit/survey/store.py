@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import os
+import stat
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -66,6 +67,69 @@ COLUMNS = (
     ("thumbnail", "BLOB"),
 )
 _NAMES = [name for name, _ in COLUMNS]
+
+#: DuckDB settings of every connection: the survey needs no extension and no file but its own,
+#: so none is loaded or downloaded (an SQLite file given as ``--db`` would otherwise make DuckDB
+#: fetch its sqlite extension from the network).
+CONNECTION_CONFIG = {
+    "autoload_known_extensions": False,
+    "autoinstall_known_extensions": False,
+    "allow_community_extensions": False,
+}
+#: The first bytes of an SQLite database, for a helpful refusal.
+_SQLITE_MAGIC = b"SQLite format 3\x00"
+#: DuckDB's magic number, bytes 8 to 12 of its file header.
+_DUCKDB_MAGIC = b"DUCK"
+
+
+def _log_of(path: Path) -> Path:
+    """DuckDB's write-ahead log beside a database file."""
+    return path.with_name(path.name + ".wal")
+
+
+def _one_line(error: Exception) -> str:
+    text = " ".join(str(error).split())
+    return text if len(text) <= 200 else text[:197] + "..."
+
+
+def _check_database_file(path: Path, read_only: bool) -> None:
+    """``InputError`` unless ``path`` can be a survey database: a UTF-8 name, a regular DuckDB file or none.
+
+    Checked with ``stat`` and a read of the header (``O_NONBLOCK``) before DuckDB sees the file,
+    so that a FIFO, a device, an SQLite or other file is refused in one line, never opened by DuckDB.
+    """
+    from bokehfit.outputs import file_kind, open_regular
+
+    try:
+        os.fsencode(path).decode("utf-8")
+    except UnicodeDecodeError:
+        raise InputError(f"--db {str(path)!r}: the name is not valid UTF-8, which DuckDB needs; rename it") from None
+    if read_only and not os.path.lexists(path):
+        raise InputError(f"--db {str(path)!r} does not exist (run a survey into it first)")
+    if not path.parent.is_dir():
+        raise InputError(f"--db folder {str(path.parent)!r} does not exist")
+    for file in (path, _log_of(path)):
+        try:
+            mode = os.stat(file).st_mode
+        except FileNotFoundError:
+            if os.path.lexists(file):
+                raise InputError(f"--db {str(file)!r} is a broken symbolic link; remove it or choose another name") from None
+            continue
+        except OSError as error:
+            raise InputError(f"--db {str(file)!r} can't be read: {error.strerror or error}") from None
+        if not stat.S_ISREG(mode):
+            raise InputError(f"--db {str(file)!r} is {file_kind(mode)}, not a database file; choose another name")
+    if not path.exists():
+        return
+    try:
+        with open_regular(path) as file:
+            head = file.read(16)
+    except OSError as error:
+        raise InputError(f"--db {str(path)!r} can't be read: {error.strerror or error}") from None
+    if head.startswith(_SQLITE_MAGIC):
+        raise InputError(f"--db {str(path)!r} is an SQLite database, not a survey database (DuckDB); choose another name")
+    if head and head[8:12] != _DUCKDB_MAGIC:
+        raise InputError(f"--db {str(path)!r} is not a DuckDB database (a survey database); choose another name")
 #: Columns left out of the table that :meth:`SurveyStore.table` returns and the Parquet export.
 _BULKY = ("result", "thumbnail")
 
@@ -94,7 +158,7 @@ def row_from_record(record: dict, *, size_bytes: int | None, json_path: str | No
     discs = document.get("discs") or []
     metrics = document.get("metrics") or {}
     blades = aperture.get("blades")
-    return {
+    row = {
         "sha256": record["sha256"],
         "path": record["path"],
         "size_bytes": size_bytes,
@@ -134,6 +198,19 @@ def row_from_record(record: dict, *, size_bytes: int | None, json_path: str | No
         "result": json.dumps(document, allow_nan=False) if document else None,
         "thumbnail": record.get("thumbnail"),
     }
+    return {name: _storable(value) for name, value in row.items()}
+
+
+def _storable(value):
+    """Text that DuckDB can store: a file name's undecodable bytes (lone surrogates) become U+FFFD."""
+    if isinstance(value, str):
+        try:
+            value.encode("utf-8")
+        except UnicodeEncodeError:
+            from bokehfit.outputs import replace_surrogates
+
+            return replace_surrogates(value)
+    return value
 
 
 class SurveyStore:
@@ -155,25 +232,57 @@ class SurveyStore:
     """
 
     def __init__(self, path: str | os.PathLike, *, read_only: bool = False):
-        import duckdb
-
         self.path = Path(path)
+        self.connection = None
         if self.path.suffix.lower() not in DB_SUFFIXES:
             raise InputError(f"--db must end in {', '.join(DB_SUFFIXES)} (got {str(self.path)!r})")
-        if read_only and not self.path.is_file():
-            raise InputError(f"--db {str(self.path)!r} does not exist (run a survey into it first)")
-        if not self.path.parent.is_dir():
-            raise InputError(f"--db folder {str(self.path.parent)!r} does not exist")
+        _check_database_file(self.path, read_only)
         existed = self.path.exists()
+        if read_only and _log_of(self.path).exists():
+            self._open_checked(existed, False, read_only_use=True)  # fold in (and check) an interrupted survey's log
+            self.close()
+        self._open_checked(existed, read_only)
+
+    def _open_checked(self, existed: bool, read_only: bool, read_only_use: bool = False) -> None:
+        self._open(read_only)
         try:
-            self.connection = duckdb.connect(str(self.path), read_only=read_only)
-        except duckdb.Error as error:
-            raise InputError(f"--db {str(self.path)!r} can't be opened as a survey database: {' '.join(str(error).split())}") from None
-        try:
-            self._check_or_create(existed, read_only)
+            self._guarded(self._check_or_create, existed, read_only or read_only_use)
+            if not read_only:
+                self._guarded(self._check_log_folded)
         except BaseException:
             self.connection.close()
+            self.connection = None
             raise
+
+    def _open(self, read_only: bool) -> None:
+        import duckdb
+
+        try:
+            self.connection = duckdb.connect(str(self.path), read_only=read_only, config=CONNECTION_CONFIG)
+        except duckdb.Error as error:
+            raise InputError(f"--db {str(self.path)!r} can't be opened as a survey database: {_one_line(error)}") from None
+
+    def _guarded(self, work, *args):
+        """``work(*args)``, a database error in it made one ``InputError`` naming the file (a damaged database)."""
+        import duckdb
+
+        try:
+            return work(*args)
+        except duckdb.Error as error:
+            raise InputError(f"--db {str(self.path)!r} is damaged or not a survey database ({_one_line(error)}); "
+                             "start a new database") from None
+
+    def _check_log_folded(self) -> None:
+        """``InputError`` if a write-ahead log is left after a checkpoint: DuckDB could not replay it (damaged)."""
+        log = _log_of(self.path)
+        if not log.exists():
+            return
+        self.connection.execute("CHECKPOINT")
+        if log.exists() and log.stat().st_size > 0:
+            raise InputError(
+                f"--db {str(self.path)!r}: its write-ahead log {log.name!r} is damaged (DuckDB could not replay it); "
+                f"move {log.name!r} away to open the database without the rows it held"
+            )
 
     def _check_or_create(self, existed: bool, read_only: bool) -> None:
         tables = {row[0] for row in self.connection.execute("SELECT table_name FROM information_schema.tables").fetchall()}
@@ -185,6 +294,14 @@ class SurveyStore:
                     f"--db {str(self.path)!r} is a survey database of schema {version}; this bokehfit reads schema "
                     f"{SURVEY_SCHEMA_VERSION}: start a new database"
                 )
+            columns = self.connection.execute(
+                "SELECT column_name FROM information_schema.columns WHERE table_name = 'photos' ORDER BY ordinal_position"
+            ).fetchall()
+            if [name for (name,) in columns] != _NAMES:
+                what = "no photos table" if not columns else "a photos table with other columns than this bokehfit writes"
+                raise InputError(f"--db {str(self.path)!r} is a survey database with {what}; start a new database")
+            # every block of every column read once: a damaged (cut) file fails here, not halfway through a survey
+            self.connection.execute("SELECT count(*), min(hash(COLUMNS(*))) FROM photos").fetchall()
             return
         if tables or (existed and read_only):
             raise InputError(f"--db {str(self.path)!r} is a DuckDB database that bokehfit did not make; choose another name")
@@ -207,6 +324,8 @@ class SurveyStore:
 
     def close(self) -> None:
         """Checkpoint (fold the log into the file) and close; safe to call twice."""
+        if getattr(self, "connection", None) is None:
+            return
         if self.connection is not None:
             import duckdb
 
@@ -219,6 +338,9 @@ class SurveyStore:
 
     def put(self, row: dict) -> None:
         """Store one photo's row (replacing an earlier row of the same photo), in its own transaction."""
+        self._guarded(self._put, row)
+
+    def _put(self, row: dict) -> None:
         placeholders = ", ".join("?" for _ in _NAMES)
         self.connection.execute("BEGIN TRANSACTION")
         try:
@@ -232,17 +354,19 @@ class SurveyStore:
 
     def statuses(self) -> dict[str, str]:
         """sha256 → status of every photo stored."""
-        return dict(self.connection.execute("SELECT sha256, status FROM photos").fetchall())
+        return dict(self._guarded(lambda: self.connection.execute("SELECT sha256, status FROM photos").fetchall()))
 
     def count(self) -> int:
-        return self.connection.execute("SELECT count(*) FROM photos").fetchone()[0]
+        return self._guarded(lambda: self.connection.execute("SELECT count(*) FROM photos").fetchone()[0])
 
     def table(self, *, bulky: bool = False):
         """The ``photos`` table as a ``pyarrow.Table`` ordered by path (without ``result`` and ``thumbnail`` unless ``bulky``)."""
         names = _NAMES if bulky else [name for name in _NAMES if name not in _BULKY]
-        return self.connection.sql(f"SELECT {', '.join(names)} FROM photos ORDER BY path, sha256").to_arrow_table()
+        query = f"SELECT {', '.join(names)} FROM photos ORDER BY path, sha256"
+        return self._guarded(lambda: self.connection.sql(query).to_arrow_table())
 
     def thumbnails(self) -> dict[str, bytes]:
         """sha256 → JPEG thumbnail of the photos that have one."""
-        rows = self.connection.execute("SELECT sha256, thumbnail FROM photos WHERE thumbnail IS NOT NULL").fetchall()
+        query = "SELECT sha256, thumbnail FROM photos WHERE thumbnail IS NOT NULL"
+        rows = self._guarded(lambda: self.connection.execute(query).fetchall())
         return {sha: bytes(data) for sha, data in rows}
