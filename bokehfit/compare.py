@@ -52,6 +52,9 @@ __all__ = [
     "disc_problems",
     "estimate_fstop",
     "evidence_words",
+    "distance_text",
+    "measurable",
+    "plus_minus",
     "judge",
     "kernel_words",
     "resolve_geometry",
@@ -61,6 +64,11 @@ SCHEMA_VERSION = 2
 #: Evidence in words for a BIC margin (Kass & Raftery 1995, "Bayes factors",
 #: J. Am. Stat. Assoc. 90:773, section 3.2, on the scale 2·ln B ≈ ΔBIC).
 EVIDENCE_WORDS = ((2.0, "barely any"), (6.0, "positive"), (10.0, "strong"), (math.inf, "very strong"))
+#: The verdict's first sentence aims at most this many characters (what the aperture is, how sure, why).
+HEADLINE_CHARS = 120
+#: A light this many focus distances away or farther makes a disc within 1 % of a light's at infinity
+#: (the disc grows as 1 − d_f/d, design.md §4): no photo tells them apart, so people read "≈ ∞".
+FAR_AS_INFINITY = 100.0
 #: L1 tolerance of the matched kernel: its 50 % outline is what the metrics use. It is
 #: drawn by the cheapest method that meets it, the start-up of a GPU included
 #: (``method="auto"``: ``exact`` for any usual disc, which starts no GPU), and a
@@ -190,27 +198,66 @@ class Comparison:
 
     @property
     def verdict(self) -> str:
-        """The verdict and its confidence in words, for people (the report's first line)."""
+        """The verdict in one short sentence for people: what the aperture is, how sure, why (the report's first line).
+
+        It aims at :data:`HEADLINE_CHARS` characters; the numbers behind it are :attr:`verdict_details`.
+        """
         status = self.status
         if status == "no_discs":
-            return f"No usable disc: {self.reason}."
+            return _clip(f"No usable disc: {self.reason}.")
         if status == "no_fit":
-            return f"No acceptable fit: {self.rejection}."
+            iou = self.metrics.get("iou")
+            match = "" if iou is None else f" (overlap {iou:.2f}, {MIN_ACCEPTABLE_IOU} needed)"
+            return _clip(f"No fit: no aperture shape explains these discs; the best tried was {_article(self.fit.family.aperture.display_name)}"
+                         f"{match}.")
         fit = self.fit
-        what = _describe(self.aperture_json())
-        margin = fit.margin_bic
-        runner_up = fit.runner_up.family.aperture.display_name if fit.runner_up is not None else None
-        if margin is None:
-            evidence = "only one model was tried"
-        elif margin < 0:  # set aside by the consensus or the outlines, whatever the pixels say (the notes say why)
-            evidence = f"the pixels alone favour a {runner_up} (ΔBIC {-margin:.0f})"
-        else:
-            evidence = f"{evidence_words(margin)} evidence over a {runner_up} (ΔBIC {margin:.0f})"
+        aperture = self.aperture_json()
+        what = _shape_words(aperture)
         count = len(fit.disc_fits)
-        agree = f"{count} disc{'s' if count != 1 else ''} {'agree' if count != 1 and status == 'fitted' else 'fitted'}"
         if status == "fitted":
-            return f"Sure: {what}; {agree}, {evidence}."
-        return f"Unsure: {what}, because {' and '.join(self.doubts)} ({agree}, {evidence})."
+            runner_up = self._runner_up()
+            why = "only one shape was tried" if runner_up is None else "no other shape comes close"
+            return _clip(f"Sure: {what}, from {count} discs that agree; {why}.")
+        return _clip(f"Unsure: probably {_article(what)}, but {self.short_doubts[0] if self.short_doubts else 'see the doubts'}.")
+
+    @property
+    def verdict_details(self) -> str:
+        """The numbers behind :attr:`verdict`: the aperture with its uncertainties, the evidence, every doubt."""
+        status = self.status
+        if status == "no_discs":
+            return ""
+        if status == "no_fit":
+            return f"{self.rejection}."
+        fit = self.fit
+        aperture = self.aperture_json()
+        what = _describe(aperture)
+        margin = fit.margin_bic
+        runner_up = self._runner_up()
+        count = len(fit.disc_fits)
+        discs = f"{count} disc{'s' if count != 1 else ''} fitted"
+        if margin is None or runner_up is None:
+            evidence = "only one shape was tried"
+        elif margin < 0:  # set aside by the consensus or the outlines, whatever the pixels say (the notes say why)
+            evidence = f"the pixels alone favour {_article(runner_up['display_name'])} (ΔBIC {-margin:.0f})"
+        elif status == "fitted":
+            evidence = f"{evidence_words(margin)} evidence over {_article(runner_up['display_name'])} (ΔBIC {margin:.0f})"
+        else:
+            evidence = f"ΔBIC {margin:.0f} over {_article(runner_up['display_name'])}"
+        details = f"{what}; {discs}; {evidence}"
+        if status == "unsure":
+            details += "; unsure because " + " and ".join(self.doubts)
+        return details + "."
+
+    @property
+    def short_doubts(self) -> list[str]:
+        """Each doubt in a few words, for the verdict's first sentence (most telling first)."""
+        if not self.fit or not self.doubts:
+            return []
+        return short_doubts(self.fit, self.metrics)
+
+    def _runner_up(self) -> dict | None:
+        """The runner-up's candidate entry (the JSON's), the one the verdict and the tables name."""
+        return next((c for c in self.aperture_json()["candidates"] if c.get("role") == "runner_up"), None)
 
     def kernel_json(self) -> dict | None:
         """The kernel drawn and measured: the reported aperture, at the angle the discs show."""
@@ -249,10 +296,17 @@ class Comparison:
                                            "edge_blur_px", "angle_note", "message")}
             for name in LENS_FEATURES:
                 data[name] = data[f"{name}_uncertainty"] = None
-            data.update(fstop, focus_side=None, sure=False, doubts=[], discs_fitted=0, candidates=[])
+            data.update(fstop, focus_side=None, sure=False, doubts=[], discs_fitted=0, candidates=[], runner_up=None,
+                        diameter_reason=None)
             return data
         data = fit.to_json()
         data.update(fstop, angle_note=_angle_note(fit), sure=not self.doubts, doubts=self.doubts)
+        data["diameter_reason"] = None
+        if not measurable(data["diameter_px"], data["diameter_uncertainty_px"]):
+            data["diameter_reason"] = unmeasurable_reason(f"{data['diameter_px']:.2f} px", data["diameter_uncertainty_px"],
+                                                          "the discs' sizes disagree (lights at many distances)")
+            data["diameter_px"] = None
+        data["candidates"], data["runner_up"] = _ranked_candidates(fit, data["candidates"])
         return data
 
     def disc_json(self, disc: Disc) -> dict:
@@ -284,6 +338,7 @@ class Comparison:
             "status": self.status,
             "reason": self.reason,
             "verdict": self.verdict,
+            "verdict_details": self.verdict_details,
             "input": self.photo.input_json(),
             "geometry": self.geometry.to_json(),
             "detection": {"candidates": self.search.candidates, "rejected": dict(self.search.rejected),
@@ -301,7 +356,7 @@ class Comparison:
         data = self.to_json("")
         photo, discs = data["input"], data["discs"]
         usable, used = sum(d["usable"] for d in discs), sum(d["used"] for d in discs)
-        lines = [self.verdict,
+        lines = [self.verdict] + ([self.verdict_details] if self.verdict_details else []) + [
                  f"{self.photo.path.name}: {photo['width']}×{photo['height']}, {len(discs)} discs "
                  f"({usable} usable, {used} used in the fit, {len(discs) - usable} rejected)"]
         lines.extend(f"note: {note}" for note in photo["notes"])
@@ -311,13 +366,13 @@ class Comparison:
             if aperture["exif_fnumber"] is not None:
                 lines.append(f"EXIF: f/{aperture['exif_fnumber']:g} (no f-stop fitted: {aperture['fstop_reason']})")
             return "\n".join(lines)
-        lines.append(f"aperture: {_describe(aperture)}, disc {_fmt(aperture['diameter_px'], 2)} "
-                     f"± {_fmt(aperture['diameter_uncertainty_px'], 2)} px")
+        lines.append(f"aperture: {_describe(aperture)}, disc {diameter_text(aperture)}")
         lines.append("f-stop: " + fstop_text(aperture))
         lines.extend(self.fstop_lines(data))
         if aperture["angle_note"]:
             lines.append(aperture["angle_note"])
-        ranked = ", ".join(f"{c['display_name']} (ΔBIC {c['delta_bic']:.0f})" for c in aperture["candidates"][1:])
+        ranked = ", ".join(f"{c['display_name']} (ΔBIC {c['delta_bic']:.0f}{', the same answer' if c['role'] == 'same_answer' else ''})"
+                           for c in aperture["candidates"][1:])
         lines.append(f"runners-up: {ranked or 'none'}")
         lines.append("metrics (discs vs kernel, median): " + ", ".join(
             f"{k} {v:.4f}" for k, v in data["metrics"].items() if v is not None))
@@ -336,8 +391,10 @@ class Comparison:
             depths = [d["depth_m"] for d in data["discs"] if d["used"]]
             known = [d for d in depths if d is not None]
             if known:
-                lines.append(f"lights' distance implied by EXIF f/{aperture['exif_fnumber']:g}: median "
-                             f"{float(np.median(known)):.3g} m, {min(known):.3g}–{max(known):.3g} m over {len(known)} of "
+                focus = data["geometry"]["focus_distance_m"]
+                median, low, high = (distance_text(d, focus) for d in (float(np.median(known)), min(known), max(known)))
+                spread = f"{low} for" if low == high else f"median {median}, {low}–{high} over"
+                lines.append(f"lights' distance implied by EXIF f/{aperture['exif_fnumber']:g}: {spread} {len(known)} of "
                              f"{len(depths)} fitted discs (per disc: depth_m in the JSON)")
         if aperture["fstop_consistency"]:
             lines.append("inconsistent: " + aperture["fstop_consistency"])
@@ -348,7 +405,7 @@ def fstop_text(aperture: dict) -> str:
     """The f-stop for people from the JSON's aperture: a value, a bound (said as one), or why it is unknown."""
     if aperture["fstop"] is None:
         return f"unknown: {aperture['fstop_reason']}"
-    value = f"f/{aperture['fstop']:.2f} ± {aperture['fstop_uncertainty']:.2f}"
+    value = "f/" + plus_minus(aperture["fstop"], aperture["fstop_uncertainty"])
     how = f"{aperture['size_convention']}, {aperture['lens_model']} lens"
     if aperture.get("fstop_bound") == "upper":
         return f"at most {value} ({how}; {aperture['fstop_meaning']})"
@@ -379,27 +436,149 @@ def _fmt(value, digits: int) -> str:
     return "—" if value is None else f"{value:.{digits}f}"
 
 
+def measurable(value: float | None, uncertainty: float | None) -> bool:
+    """Whether a value is a measurement: its uncertainty (one standard deviation) does not exceed it."""
+    return value is None or uncertainty is None or (math.isfinite(uncertainty) and uncertainty <= abs(value))
+
+
+def unmeasurable_reason(shown: str, uncertainty: float, why: str) -> str:
+    """The reason a value is "not measurable", in words, with the numbers behind it."""
+    return f"not measurable: {shown} ± {_significant(uncertainty)}, an uncertainty larger than the value ({why})"
+
+
+def _significant(uncertainty: float) -> str:
+    return f"{uncertainty:.{_decimals(uncertainty)}f}"
+
+
+def _decimals(uncertainty: float | None, least: int = 2) -> int:
+    """Decimals for a value with this uncertainty: ``least``, more for an uncertainty under 0.01 (its first
+    significant digit shows), fewer for one of 1 and more (two significant digits)."""
+    if uncertainty is None or not uncertainty > 0 or not math.isfinite(uncertainty):
+        return least
+    if uncertainty >= 1.0:
+        return max(0, min(least, 1 - math.floor(math.log10(uncertainty))))
+    return max(least, min(6, -math.floor(math.log10(uncertainty))))
+
+
+def plus_minus(value: float, uncertainty: float | None, digits: int = 2, unit: str = "") -> str:
+    """``value ± uncertainty`` for people: the uncertainty to two significant digits and the value to match;
+    the value alone where there is no uncertainty (never "± 0.00")."""
+    if uncertainty is None or not uncertainty > 0:
+        return f"{value:.{digits}f}{unit}"
+    decimals = _decimals(uncertainty, digits)
+    return f"{value:.{decimals}f} ± {uncertainty:.{decimals}f}{unit}"
+
+
+def diameter_text(aperture: dict) -> str:
+    """The disc diameter of the JSON's aperture for people, or why it is not measurable."""
+    if aperture["diameter_px"] is None:
+        return aperture.get("diameter_reason") or "unknown"
+    return plus_minus(aperture["diameter_px"], aperture["diameter_uncertainty_px"], unit=" px")
+
+
+def distance_text(distance_m: float | None, focus_distance_m: float | None = None) -> str:
+    """A light's distance for people: "≈ ∞" at :data:`FAR_AS_INFINITY` focus distances or farther."""
+    if distance_m is None:
+        return "—"
+    if not math.isfinite(distance_m) or (focus_distance_m and distance_m >= FAR_AS_INFINITY * focus_distance_m):
+        return "≈ ∞"
+    return f"{distance_m:.3g} m"
+
+
+def short_doubts(fit: ApertureFit, metrics: dict[str, float | None]) -> list[str]:
+    """The doubts of :func:`judge` in a few words each, most telling first (for the verdict's first sentence)."""
+    words = []
+    if fit.close_runner_up:
+        words.append(f"{_article(fit.runner_up.family.aperture.display_name)} fits almost as well")
+    fitted = len(fit.disc_fits)
+    if fitted < MIN_SURE_DISCS:
+        words.append(f"only {fitted} disc{' is' if fitted == 1 else 's are'} clean enough")
+    if fit.outline_misfit > REGULAR_OUTLINE_MISFIT:
+        words.append("the discs' outlines are irregular")
+    iou = metrics.get("iou")
+    if iou is not None and iou < MIN_SURE_IOU:
+        words.append("the discs match it only loosely")
+    if fit.notes:
+        words.append("a better-fitting shape was set aside (see the notes)")
+    return words
+
+
+def _ranked_candidates(fit: ApertureFit, candidates: list[dict]) -> tuple[list[dict], dict | None]:
+    """The candidates in table order, each with its ``role``: the chosen model, the runner-up (the best
+    model with another answer, the one the verdict names), then the rest by ΔBIC; and the runner-up."""
+    chosen, rest = dict(candidates[0]), [dict(c) for c in candidates[1:]]
+    chosen["role"] = "chosen"
+    runner_up = fit.runner_up
+    name = None if runner_up is None else runner_up.family.name
+    first = [c for c in rest if c["name"] == name][:1]
+    others = sorted((c for c in rest if all(c is not f for f in first)), key=lambda c: c["delta_bic"])
+    for c in first:
+        c["role"] = "runner_up"
+    same = {m.family.name for m in fit.candidates[1:] if fit.candidates[0].same_answer(m)}
+    for c in others:
+        c["role"] = "same_answer" if c["name"] in same else "other"
+    return [chosen, *first, *others], (first[0] if first else None)
+
+
+def _clip(sentence: str) -> str:
+    """A headline kept near :data:`HEADLINE_CHARS`: cut at a clause boundary before it when longer."""
+    if len(sentence) <= HEADLINE_CHARS:
+        return sentence
+    for mark in (" (", "; ", ": ", ", "):
+        cuts = [i for i in range(len(sentence)) if sentence.startswith(mark, i) and i < HEADLINE_CHARS - 1
+                and sentence.count("(", 0, i) == sentence.count(")", 0, i) and i > len(sentence.split(":")[0]) + 2]
+        if cuts:
+            return sentence[:max(cuts)].rstrip(" ,;:") + "."
+    return sentence[: HEADLINE_CHARS - 1].rstrip() + "…"
+
+
+def _shape_words(aperture: dict) -> str:
+    """The aperture's shape and angle for the verdict's first sentence (its features come after, with numbers)."""
+    name = Aperture.from_json(aperture).display_name
+    if aperture["angle_deg"] is not None:
+        name += f" at {aperture['angle_deg']:.2f}°"
+    return name
+
+
+def _article(words: str) -> str:
+    """'a circle', 'an 8-blade polygon'."""
+    vowel = words[:1].lower() in "aeiou" or words.split("-")[0] in ("8", "11", "18")
+    return ("an " if vowel else "a ") + words
+
+
 def _describe(aperture: dict) -> str:
-    """'hexagon at 15.02° ± 0.05°' from the JSON's aperture (its numbers, rounded for people)."""
+    """'hexagon at 15.02° ± 0.05°' from the JSON's aperture (its numbers, rounded for people).
+
+    A feature whose uncertainty exceeds its departure from the plain aperture is not shown: the
+    discs do not support it.
+    """
     name = Aperture.from_json(aperture).display_name
     if aperture["aspect"] is not None:
         name += f" (aspect {aperture['aspect']:.2f})"
     if aperture["angle_deg"] is not None:
-        name += f" at {aperture['angle_deg']:.2f}° ± {_fmt(aperture['angle_uncertainty_deg'], 2)}°"
+        name += " at " + plus_minus(aperture["angle_deg"], aperture["angle_uncertainty_deg"], unit="°")
+
+    def supported(key, neutral=0.0, part=None):
+        value, sigma = aperture.get(key), aperture.get(f"{key}_uncertainty")
+        if part is not None:
+            value = None if value is None else value.get(part)
+            sigma = None if sigma is None else sigma.get(part)
+        return value is not None and value != neutral and measurable(value - neutral, sigma)
+
     features = []
-    if aperture.get("roundness"):
-        features.append(f"roundness {aperture['roundness']:.2f} ± {_fmt(aperture.get('roundness_uncertainty'), 2)}")
-    if aperture.get("squeeze") not in (None, 1.0):
+    if supported("roundness"):
+        features.append("roundness " + plus_minus(aperture["roundness"], aperture.get("roundness_uncertainty")))
+    if supported("squeeze", 1.0):
         tall = "taller than wide" if aperture["squeeze"] > 1 else "wider than tall"
-        features.append(f"anamorphic squeeze {aperture['squeeze']:.3f} ± {_fmt(aperture.get('squeeze_uncertainty'), 3)} "
+        features.append(f"anamorphic squeeze {plus_minus(aperture['squeeze'], aperture.get('squeeze_uncertainty'), 3)} "
                         f"(discs {tall})")
-    if aperture.get("rim"):
+    if supported("rim"):
         side = "bright rim" if aperture["rim"] > 0 else "bright centre"
-        features.append(f"rim {aperture['rim']:+.2f} ± {_fmt(aperture.get('rim_uncertainty'), 2)} ({side})")
+        features.append(f"rim {plus_minus(aperture['rim'], aperture.get('rim_uncertainty'))} ({side})")
     if aperture.get("vignetting"):
         cut = aperture["vignetting"]
         features.append(f"cat-eye vignetting (barrel radius {cut['radius']:.2f}, shift {cut['shift']:+.2f})")
-    if aperture.get("chromatic"):
+    if aperture.get("chromatic") and (supported("chromatic", part="red") or supported("chromatic", part="blue")):
         colour = aperture["chromatic"]
         features.append(f"chromatic (red disc {100 * colour['red']:+.1f} %, blue {100 * colour['blue']:+.1f} % of green's)")
     return name + "".join(f", {feature}" for feature in features)
@@ -579,6 +758,9 @@ def estimate_fstop(
                 "check the light distance, the focus distance and the sensor width (a crop, a teleconverter or a lens far "
                 "from thin would also explain it)"
             )
+    if not measurable(value, value * relative):
+        return FStop(None, None, unmeasurable_reason(f"f/{value:.2f}", value * relative, "the discs' sizes disagree"),
+                     convention, lens_model, exif_fnumber=exif_n, light_distances_m=distances)
     return FStop(value, value * relative, None, convention, lens_model, bound, meaning, exif_n, distances, consistency)
 
 

@@ -16,6 +16,7 @@ import pytest
 from test_cli_compare import PHOTO, bokehfit_cli, strict_json, write_jpeg, written
 
 from bokehfit.apertures import make_aperture
+from bokehfit.compare import diameter_text
 from bokehfit.discs import find_discs
 from bokehfit.report.overlay import ROLE_BGR, draw_disc_overlay
 from bokehfit.synthetic import SyntheticDisc, render_discs
@@ -51,8 +52,10 @@ def test_one_angle_and_one_diameter_everywhere(hexagon_run):
     angle, diameter = f"{aperture['angle_deg']:.2f}°", f"{aperture['diameter_px']:.2f}"
     verdict = stdout.splitlines()[0]
     assert verdict == document["verdict"] and angle in verdict
-    assert f"disc {diameter} ± " in stdout
-    assert f"{diameter} ± " in page and f"{angle} counter-clockwise from x" in page
+    shown = diameter_text(aperture)  # to the uncertainty's digits
+    assert shown.startswith(f"{aperture['diameter_px']:.2f}") and " ± " in shown
+    assert f"disc {shown}" in stdout
+    assert shown in page and f"{angle} counter-clockwise from x" in page
     # The candidate table's winner row shows the same diameter.
     assert re.search(rf"<td>hexagon</td><td>{aperture['angle_deg']:.2f}</td>.*?<td>{diameter}</td>", page)
     # Each fitted disc's tile shows the JSON's fitted diameter, and nothing else claims to.
@@ -69,7 +72,9 @@ def test_report_reads_for_a_photographer(hexagon_run):
     _, document, page, _ = hexagon_run
     first = re.search(r'<p class="verdict (\w+)">([^<]*)</p>', page)
     assert first and first.group(1) == "fitted" and first.group(2).startswith("Sure: hexagon")
-    assert "very strong evidence" in first.group(2)
+    assert len(first.group(2)) <= 120, "one short sentence first"
+    details = re.search(r'<p class="details">([^<]*)</p>', page)
+    assert details and "very strong evidence" in details.group(1), "the numbers after it"
     assert page.index('class="verdict') < page.index("<svg"), "the verdict comes first"
     assert 'aria-label="aperture diagram"' in page
     assert page.count('class="bar"') >= 2, "colour scales on the residuals and on the kernel"

@@ -204,6 +204,30 @@ def test_report_shows_the_groups(surveyed):
     assert len(page.links) == 5 and all((folder / link).is_file() for link in page.links)
 
 
+def test_fstop_bounds_are_stored_and_shown_as_bounds(surveyed):
+    # the lights' distance is unknown: each fitted f-stop is the largest the discs allow
+    fitted = [row for row in surveyed["rows"].values() if row["status"] == "fitted"]
+    assert fitted and all(row["fstop_bound"] == "upper" for row in fitted)
+    page = _Page()
+    page.feed((surveyed["folder"] / "lens.html").read_text())
+    from bokehfit.survey.report import SUMMARISED
+
+    column = 4 + [name for name, _, _ in SUMMARISED].index("fstop")  # after f-number, photos, statuses, shape
+    shown = {cells[0]: cells[column] for cells in page.group_rows}
+    assert shown["f/2"].startswith("≤ 2.0") and shown["f/4"].startswith("≤ 4.0"), shown
+
+
+def test_a_group_of_one_photo_shows_its_value_not_a_spread(tmp_path):
+    from bokehfit.survey.report import build_report
+
+    row = {"sha256": "a" * 64, "path": "one.jpg", "status": "fitted", "camera": CAMERA, "lens": LENS, "exif_fnumber": 2.0,
+           "shape": "circle", "blades": None, "fstop": 2.0, "fstop_uncertainty": 0.0, "fstop_bound": "upper",
+           "diameter_px": 40.0, "html_path": None}
+    page = build_report([row], {}, report_path=tmp_path / "r.html", db_path=tmp_path / "s.duckdb")
+    cells = page.split("<tr class='group'>")[1].split("</tr>")[0]
+    assert "±" not in cells and "(1 photo)" in cells and "≤ 2.00" in cells, cells
+
+
 def test_parquet_export_holds_the_table(surveyed):
     table = pyarrow.parquet.read_table(surveyed["folder"] / "lens.parquet")
     assert table.num_rows == 6 and "thumbnail" not in table.column_names

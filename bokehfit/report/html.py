@@ -17,7 +17,7 @@ import math
 import cv2
 import numpy as np
 
-from bokehfit.compare import Comparison, evidence_words, fstop_text, kernel_words
+from bokehfit.compare import Comparison, diameter_text, distance_text, evidence_words, fstop_text, kernel_words, plus_minus
 from bokehfit.fit.pixels import model_window
 from bokehfit.metrics import METRICS
 from bokehfit.report.overlay import ROLE_BGR, disc_role, draw_disc_overlay
@@ -43,6 +43,7 @@ h1 { font-size: 22px; } h2 { font-size: 17px; margin-top: 28px; border-bottom: 1
 table { border-collapse: collapse; } td, th { padding: 3px 10px; text-align: right; border-bottom: 1px solid #eee; }
 th { background: #f5f5f7; } td:first-child, th:first-child { text-align: left; }
 .verdict { font-size: 18px; padding: 12px 16px; border-radius: 6px; border-left: 6px solid; }
+.details { color: #444; margin: 4px 0 12px; }
 .fitted { background: #e9f6ef; border-color: #009e73; } .unsure { background: #fff4e5; border-color: #e69f00; }
 .no_fit, .no_discs { background: #fdecea; border-color: #d55e00; }
 .head { display: flex; gap: 24px; align-items: flex-start; } .head .facts { flex: 1; }
@@ -200,23 +201,44 @@ def _facts(data: dict) -> str:
 
     rows = [["shape", Aperture.from_json(aperture).display_name]]
     if aperture["angle_deg"] is not None:
-        rows.append(["angle", f"{aperture['angle_deg']:.2f}° ± {_fmt(aperture['angle_uncertainty_deg'], 2)}°"])
+        rows.append(["angle", plus_minus(aperture["angle_deg"], aperture["angle_uncertainty_deg"], unit="°")])
     if aperture["aspect"] is not None:
         rows.append(["aspect (width / height)", f"{aperture['aspect']:.2f}"])
-    rows.append(["disc diameter", f"{aperture['diameter_px']:.2f} ± {_fmt(aperture['diameter_uncertainty_px'], 2)} px"])
+    rows.append(["disc diameter", diameter_text(aperture)])
     rows.append(["f-stop", fstop_text(aperture)])
     if aperture.get("exif_fnumber") is not None:
         rows.append(["EXIF f-number", f"f/{aperture['exif_fnumber']:g}"])
         depths = [d["depth_m"] for d in data["discs"] if d["used"] and d.get("depth_m") is not None]
         if depths:
+            focus = data["geometry"]["focus_distance_m"]
+            median, low, high = (distance_text(d, focus) for d in (float(np.median(depths)), min(depths), max(depths)))
+            spread = f"{low} for" if low == high else f"median {median} ({low}–{high}),"
             rows.append(["lights' distance from EXIF f-number",
-                         f"median {float(np.median(depths)):.3g} m ({min(depths):.3g}–{max(depths):.3g} m, "
-                         f"{len(depths)} discs; on the overlay after each disc's number)"])
+                         f"{spread} {len(depths)} discs (on the overlay after each disc's number)"])
     if aperture.get("fstop_consistency"):
         rows.append(["inconsistent", aperture["fstop_consistency"]])
     rows.append(["discs fitted", str(aperture["discs_fitted"])])
     heading = "fitted" if data["status"] in ("fitted", "unsure") else "best model tried (not acceptable)"
     return _table(["", heading], rows)
+
+
+def _candidate_rows(candidates: list[dict]) -> list[list[str]]:
+    """The candidate table: "best" marks the chosen model only where its ΔBIC is the lowest; a model the
+    pixels favour but the fit set aside (its notes say why) is marked as such."""
+    chosen = candidates[0]
+    lowest = min(c["delta_bic"] for c in candidates)
+    rows = []
+    for c in candidates:
+        margin = c["delta_bic"] - chosen["delta_bic"]
+        if c is chosen:
+            words = "best" if c["delta_bic"] <= lowest else "chosen (a model with a lower ΔBIC was set aside)"
+        elif margin < 0:
+            words = "lower ΔBIC, set aside (see the notes)"
+        else:
+            words = evidence_words(margin) + (" (the same answer)" if c.get("role") == "same_answer" else "")
+        rows.append([c["name"], _fmt(c["angle_deg"], 2), f"{c['delta_bic']:.0f}", words, _fmt(c["screen_rms"], 3),
+                     _fmt(c["diameter_px"], 2)])
+    return rows
 
 
 def build_html(comparison: Comparison, command_line: str) -> str:
@@ -225,7 +247,9 @@ def build_html(comparison: Comparison, command_line: str) -> str:
     data = comparison.to_json(command_line)
     entries = {entry["index"]: entry for entry in data["discs"]}
     used = {index for index, entry in entries.items() if entry["used"]}
-    depths = {index: f"{entry['depth_m']:.3g} m" for index, entry in entries.items() if entry.get("depth_m") is not None}
+    focus = data["geometry"]["focus_distance_m"]
+    depths = {index: distance_text(entry["depth_m"], focus).replace("≈ ∞", "~inf")  # the overlay's font is ASCII
+              for index, entry in entries.items() if entry.get("depth_m") is not None}
     overlay = draw_disc_overlay(photo.display, comparison.search.discs, used=used, max_side=MAX_OVERVIEW_PX, labels=depths)
     status = data["status"]
     parts = [
@@ -234,6 +258,8 @@ def build_html(comparison: Comparison, command_line: str) -> str:
         f"<h1>bokehfit compare: {html.escape(photo.path.name)}</h1>",
         f'<p class="verdict {status}">{html.escape(data["verdict"])}</p>',
     ]
+    if data.get("verdict_details"):
+        parts.append(f'<p class="details">{html.escape(data["verdict_details"])}</p>')
     aperture = data["aperture"]
     if aperture["shape"] is not None:
         note = f"<p>{html.escape(aperture['angle_note'])}</p>" if aperture["angle_note"] else ""
@@ -270,11 +296,11 @@ def build_html(comparison: Comparison, command_line: str) -> str:
             + _colour_bar("share of the light per pixel", [(0.0, "#000"), (1.0, "#fff")], ["0", f"{peak:.2e}"])
         )
     if aperture["candidates"]:
-        rows = [[c["name"], _fmt(c["angle_deg"], 2), f"{c['delta_bic']:.0f}", evidence_words(c["delta_bic"]) if i else "best",
-                 _fmt(c["screen_rms"], 3), _fmt(c["diameter_px"], 2)] for i, c in enumerate(aperture["candidates"])]
-        parts.append("<h2>Candidate apertures</h2><p>ΔBIC: how much worse each model explains the discs than the best; "
-                     "the words say how strongly the best is preferred.</p>"
-                     + _table(["model", "angle °", "ΔBIC", "evidence for the best", "outline misfit", "diameter px"], rows))
+        parts.append("<h2>Candidate apertures</h2><p>The chosen model first, then the runner-up the verdict names, then the "
+                     "rest. ΔBIC: how much worse each model explains the discs' pixels than the one that explains them "
+                     "best; the words say how strongly the chosen model is preferred.</p>"
+                     + _table(["model", "angle °", "ΔBIC", "evidence for the chosen", "outline misfit", "diameter px"],
+                              _candidate_rows(aperture["candidates"])))
     if any(v is not None for v in data["metrics"].values()):
         metric_rows = [[name, _fmt(data["metrics"][name], 3), METRICS[name].better, METRICS[name].description] for name in METRICS]
         parts.append("<h2>Metrics: discs against the matched kernel (median)</h2>"

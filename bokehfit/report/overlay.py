@@ -69,14 +69,36 @@ def draw_disc_overlay(
     # FONT_HERSHEY_SIMPLEX is about 22 px tall at scale 1.
     font_scale = max(0.35, LABEL_HEIGHT_REL * max(height, width) / 22.0)
     labels = labels or {}
+    placed: list[tuple[int, int, int, int]] = []  # the labels drawn so far, (x0, y0, x1, y1)
     for disc in discs:
         colour = ROLE_BGR[disc_role(disc, used)]
-        text = f"{disc.index}: {labels[disc.index]}" if disc.index in labels else str(disc.index)  # Hershey fonts are ASCII
         outline = (disc.outline_xy + 0.5) * scale - 0.5
         points = np.round((outline + 0.5) * (1 << _SHIFT)).astype(np.int32)
         cv2.polylines(canvas, [points], True, colour, thickness, cv2.LINE_AA, shift=_SHIFT)
-        x = int(outline[:, 0].max()) + 2 * thickness
-        y = int(outline[:, 1].min()) + int(22 * font_scale)
+        # Hershey fonts are ASCII; the longer label where it overlaps no other, else the index alone
+        texts = [f"{disc.index}: {labels[disc.index]}", str(disc.index)] if disc.index in labels else [str(disc.index)]
+        for k, text in enumerate(texts):
+            spot = _label_spot(text, outline, font_scale, thickness, placed, width, height, last=k == len(texts) - 1)
+            if spot is not None:
+                break
+        (x, y), box = spot
+        placed.append(box)
         cv2.putText(canvas, text, (x, y), cv2.FONT_HERSHEY_SIMPLEX, font_scale, (0, 0, 0), 3 * thickness, cv2.LINE_AA)
         cv2.putText(canvas, text, (x, y), cv2.FONT_HERSHEY_SIMPLEX, font_scale, colour, thickness, cv2.LINE_AA)
     return canvas
+
+
+def _label_spot(text, outline, font_scale, thickness, placed, width, height, *, last):
+    """Where a disc's label goes: beside the disc (right, then left, below, above) where it overlaps
+    no label drawn before; ((x, y) baseline origin, box), or None (the first spot when ``last``)."""
+    (w, h), base = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, font_scale, 3 * thickness)
+    x0, x1 = int(outline[:, 0].min()), int(outline[:, 0].max())
+    y0, y1 = int(outline[:, 1].min()), int(outline[:, 1].max())
+    gap = 2 * thickness
+    spots = [(x1 + gap, y0 + h), (x1 + gap, y1), (x0 - gap - w, y0 + h), (x0, y1 + gap + h), (x0, y0 - gap - base)]
+    boxes = [(x, y - h, x + w, y + base) for x, y in spots]
+    for spot, box in zip(spots, boxes):
+        inside = box[0] >= 0 and box[1] >= 0 and box[2] <= width and box[3] <= height
+        if inside and not any(box[0] < b[2] and b[0] < box[2] and box[1] < b[3] and b[1] < box[3] for b in placed):
+            return spot, box
+    return (spots[0], boxes[0]) if last else None

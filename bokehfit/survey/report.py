@@ -146,8 +146,9 @@ def _plots(by_fnumber: dict[float | None, list[dict]]) -> str:
     """Disc shape against f-number, and fitted f-stop against EXIF FNumber, as two inline PNGs."""
     from matplotlib.figure import Figure
 
-    points = [(f, shape_label(row), row.get("fstop")) for f, rows in by_fnumber.items() if f is not None for row in rows]
-    fitted = [(f, label) for f, label, _ in points if label]
+    points = [(f, shape_label(row), row.get("fstop"), is_bound(row)) for f, rows in by_fnumber.items() if f is not None
+              for row in rows]
+    fitted = [(f, label) for f, label, _, _ in points if label]
     if not fitted:
         return "<p>No fitted photo with an EXIF f-number: nothing to plot.</p>"
     labels = sorted({label for _, label in fitted})
@@ -165,16 +166,21 @@ def _plots(by_fnumber: dict[float | None, list[dict]]) -> str:
     axes.set_ylim(-0.6, len(labels) - 0.4)
     axes.set_xlabel("EXIF f-number")
     axes.set_title("disc shape against f-number (dot: photos)")
-    fstops = [(f, s) for f, _, s in points if s is not None]
+    fstops = [(f, s, bound) for f, _, s, bound in points if s is not None]
     parts = [f'<img alt="disc shape against f-number" src="{_png(shape_figure)}">']
     if fstops:
         fstop_figure = Figure(figsize=(4.2, 3.8), layout="constrained")
         axes = fstop_figure.add_subplot()
-        x, y = np.array(fstops).T
+        x, y, bound = (np.array(column, dtype=float) for column in zip(*fstops))
+        bound = bound.astype(bool)
         top = max(x.max(), y.max()) * 1.15
         low = min(x.min(), y.min()) / 1.15
         axes.plot([low, top], [low, top], color="#999", lw=1, label="fitted = EXIF")
-        axes.scatter(x, y, color="#d55e00", s=22, label="photo")
+        if (~bound).any():
+            axes.scatter(x[~bound], y[~bound], color="#d55e00", s=22, label="photo: fitted f-stop")
+        if bound.any():  # a bound is drawn as one: a bar down from the largest f-stop the discs allow
+            axes.scatter(x[bound], y[bound], color="#0072b2", marker="_", s=80, label="photo: at most (upper bound)")
+            axes.errorbar(x[bound], y[bound], yerr=y[bound] * 0.2, uplims=True, fmt="none", ecolor="#0072b2", lw=1)
         axes.set_xscale("log", base=2)
         axes.set_yscale("log", base=2)
         axes.set_xlim(low, top)
@@ -184,7 +190,7 @@ def _plots(by_fnumber: dict[float | None, list[dict]]) -> str:
         axes.set_xlabel("EXIF FNumber")
         axes.set_ylabel("fitted f-stop")
         axes.legend(fontsize=8)
-        axes.set_title("fitted f-stop against EXIF")
+        axes.set_title("fitted f-stop (or its upper bound) against EXIF")
         parts.append(f'<img alt="fitted f-stop against EXIF FNumber" src="{_png(fstop_figure)}">')
     else:
         parts.append("<p>No fitted f-stop (the geometry was unknown): give focal length, sensor width and focus "
@@ -192,11 +198,28 @@ def _plots(by_fnumber: dict[float | None, list[dict]]) -> str:
     return '<div class="plots">' + "".join(parts) + "</div>"
 
 
-def _cell(stats: tuple[float, float, int] | None, digits: int) -> str:
+def _cell(stats: tuple[float, float, int] | None, digits: int, prefix: str = "") -> str:
+    """median ± MAD (count); a single photo's value alone, with no spread to show."""
     if stats is None:
         return "—"
     median, mad, n = stats
-    return f"{median:.{digits}f} ± {mad:.{digits}f} <small>({n})</small>"
+    if n == 1:
+        return f"{prefix}{median:.{digits}f} <small>(1 photo)</small>"
+    return f"{prefix}{median:.{digits}f} ± {mad:.{digits}f} <small>({n})</small>"
+
+
+def is_bound(row: dict) -> bool:
+    """Whether a row's ``fstop`` is an upper bound (the lights' distance unknown), not the f-stop itself."""
+    return row.get("fstop_bound") == "upper"
+
+
+def _fstop_cell(fits: list[dict]) -> str:
+    """The fitted f-stops of a group: values as values, upper bounds as "≤" (each summarised apart)."""
+    values = _spread([row.get("fstop") for row in fits if not is_bound(row)])
+    bounds = _spread([row.get("fstop") for row in fits if is_bound(row)])
+    if values is None or bounds is None:
+        return _cell(values, 2) if bounds is None else _cell(bounds, 2, "≤ ")
+    return f"{_cell(values, 2)}; {_cell(bounds, 2, '≤ ')}"
 
 
 def _thumbs(rows: list[dict], thumbnails: dict[str, bytes], report_folder: Path, db_folder: Path) -> str:
@@ -238,7 +261,8 @@ def build_report(rows: list[dict], thumbnails: dict[str, bytes], *, report_path:
         f"<p>{len(rows)} photos: " + ", ".join(f"{statuses[s]} {s}" for s in STATUSES if statuses[s])
         + f". bokehfit {html.escape(__version__)}; {html.escape(command_line)}</p>",
         "<p>Each value is the median ± the median absolute deviation over the group's fitted photos "
-        "(sure and unsure), with their number; — where nothing was fitted.</p>",
+        "(sure and unsure), with their number; — where nothing was fitted. ≤ f/N: an upper bound on the f-stop "
+        "(the lights' distance is unknown: lights nearer than infinity need a smaller f-stop).</p>",
     ]
     for (camera, lens), by_fnumber in group_rows(rows).items():
         title = f"{camera or 'unknown camera'} · {lens or 'unknown lens'}"
@@ -254,7 +278,7 @@ def build_report(rows: list[dict], thumbnails: dict[str, bytes], *, report_path:
             shape = f"{label} ({n}/{total})" if label else "—"
             counts = collections.Counter(row["status"] for row in group)
             status_text = ", ".join(f"{counts[s]} {s}" for s in STATUSES if counts[s])
-            cells = "".join(f"<td>{_cell(_spread([row.get(column) for row in fits]), digits)}</td>"
+            cells = "".join(f"<td>{_fstop_cell(fits) if column == 'fstop' else _cell(_spread([row.get(column) for row in fits]), digits)}</td>"
                             for column, _, digits in SUMMARISED)
             parts.append(f"<tr class='group'><td>{_fnumber(fnumber)}</td><td>{len(group)}</td><td>{status_text}</td>"
                          f"<td>{html.escape(shape)}</td>{cells}</tr>")

@@ -65,8 +65,12 @@ COLUMNS = (
     ("bokehfit_version", "VARCHAR"),
     ("result", "VARCHAR"),
     ("thumbnail", "BLOB"),
+    # added within schema 1 (at the end, where ALTER TABLE puts them in an older database):
+    ("fstop_bound", "VARCHAR"),  # "upper" where ``fstop`` is the largest f-stop the discs allow (compare's fstop_bound)
 )
 _NAMES = [name for name, _ in COLUMNS]
+#: Columns added within schema 1, after the first release of the table: an older database gets them on opening.
+_ADDED = ("fstop_bound",)
 
 #: DuckDB settings of every connection: the survey needs no extension and no file but its own,
 #: so none is loaded or downloaded (an SQLite file given as ``--db`` would otherwise make DuckDB
@@ -177,6 +181,7 @@ def row_from_record(record: dict, *, size_bytes: int | None, json_path: str | No
         "diameter_px": _number(aperture.get("diameter_px")),
         "fstop": _number(aperture.get("fstop")),
         "fstop_uncertainty": _number(aperture.get("fstop_uncertainty")),
+        "fstop_bound": aperture.get("fstop_bound") if aperture.get("fstop") is not None else None,
         "focus_side": aperture.get("focus_side"),
         "roundness": _number(aperture.get("roundness")),
         "squeeze": _number(aperture.get("squeeze")),
@@ -297,7 +302,16 @@ class SurveyStore:
             columns = self.connection.execute(
                 "SELECT column_name FROM information_schema.columns WHERE table_name = 'photos' ORDER BY ordinal_position"
             ).fetchall()
-            if [name for (name,) in columns] != _NAMES:
+            names = [name for (name,) in columns]
+            missing = _NAMES[len(names):] if names == _NAMES[:len(names)] else None
+            if missing and set(missing) <= set(_ADDED):  # an older bokehfit's table: the added columns are null
+                if not read_only:
+                    for name in missing:
+                        self.connection.execute(f"ALTER TABLE photos ADD COLUMN {name} {dict(COLUMNS)[name]}")
+                    missing = []
+                self._missing = list(missing)
+                names = _NAMES
+            if names != _NAMES:
                 what = "no photos table" if not columns else "a photos table with other columns than this bokehfit writes"
                 raise InputError(f"--db {str(self.path)!r} is a survey database with {what}; start a new database")
             # every block of every column read once: a damaged (cut) file fails here, not halfway through a survey
@@ -362,6 +376,8 @@ class SurveyStore:
     def table(self, *, bulky: bool = False):
         """The ``photos`` table as a ``pyarrow.Table`` ordered by path (without ``result`` and ``thumbnail`` unless ``bulky``)."""
         names = _NAMES if bulky else [name for name in _NAMES if name not in _BULKY]
+        missing = getattr(self, "_missing", ())  # an older database opened read-only
+        names = [f"NULL::{dict(COLUMNS)[name]} AS {name}" if name in missing else name for name in names]
         query = f"SELECT {', '.join(names)} FROM photos ORDER BY path, sha256"
         return self._guarded(lambda: self.connection.sql(query).to_arrow_table())
 

@@ -1,0 +1,186 @@
+"""Numbers a person can trust and verdicts a photographer can read (issue 26, points 2 and 3).
+
+One small rendered photo of circular discs (the survey's library photo at f/2: four 40 px discs whose
+size says the lights are at infinity) is compared once; the tests read its summary, JSON and HTML
+report, and variants of its fit made with :func:`dataclasses.replace` for the cases a real photo
+shows: a size whose uncertainty exceeds it, a close runner-up, a chosen model that is not the one
+with the lowest ΔBIC.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import html
+import json
+import re
+
+import pytest
+from test_survey import API_OPTIONS, write_render
+
+from bokehfit.compare import estimate_fstop, judge
+from bokehfit.report.html import build_html
+
+#: The verdict's first sentence, at most (characters).
+HEADLINE_CHARS = 120
+#: "± 0.00", "± 0", "± 0.000": an uncertainty that is none.
+ZERO_UNCERTAINTY = re.compile(r"± 0(\.0+)?(?![0-9.]*[1-9])")
+
+
+@pytest.fixture(scope="module")
+def circle(tmp_path_factory, gpu):
+    from bokehfit.compare import compare_photo
+
+    path = tmp_path_factory.mktemp("readable") / "circle_f2.jpg"
+    write_render(path, 2.0, "circle", 1)
+    options = {k: v for k, v in API_OPTIONS.items() if k != "shapes"}  # every shape: the runners-up are many
+    return compare_photo(path, **options)
+
+
+def variant(comparison, **changes):
+    """The comparison with its fit changed, the f-stop and the doubts worked out again from it."""
+    fit = dataclasses.replace(comparison.fit, **changes)
+    fstop = estimate_fstop(fit, comparison.photo, comparison.geometry, "thin", "equal-area")
+    doubts, rejection = judge(fit, comparison.metrics)
+    return dataclasses.replace(comparison, fit=fit, fstop=fstop, doubts=doubts, rejection=rejection)
+
+
+def page_text(comparison) -> str:
+    return html.unescape(re.sub(r"<[^>]+>", " ", re.sub(r'src="data:[^"]*"', "", build_html(comparison, ""))))
+
+
+def everything(comparison) -> dict[str, str]:
+    return {"summary": comparison.summary(), "json": json.dumps(comparison.to_json(""), ensure_ascii=False),
+            "html": page_text(comparison)}
+
+
+# --------------------------------------------------------------------------------------
+# Point 2: numbers a person can trust
+# --------------------------------------------------------------------------------------
+
+
+def test_a_value_whose_uncertainty_exceeds_it_is_not_measurable(circle):
+    loose = variant(circle, diameter_uncertainty_px=2.0 * circle.fit.diameter_px)
+    aperture = loose.to_json("")["aperture"]
+    assert aperture["diameter_px"] is None and aperture["diameter_reason"].startswith("not measurable")
+    assert aperture["fstop"] is None and aperture["fstop_reason"].startswith("not measurable")
+    assert "uncertainty larger than the value" in aperture["fstop_reason"]
+    for where, text in everything(loose).items():
+        assert "not measurable" in text, where
+    summary = loose.summary()
+    assert "disc not measurable" in summary and "f-stop: unknown: not measurable" in summary
+    shown = re.sub(r"not measurable: [^,]*,", "", summary + page_text(loose))  # the reason quotes the numbers
+    for value, uncertainty in re.findall(r"(\d+\.?\d*) ± (\d+\.?\d*)", shown):
+        assert float(uncertainty) <= float(value), f"{value} ± {uncertainty} shown as a result"
+
+    from bokehfit.survey.store import row_from_record
+
+    row = row_from_record({"sha256": "x", "path": "p.jpg", "status": loose.status, "document": loose.to_json("")},
+                          size_bytes=None, json_path=None, html_path=None)
+    assert row["diameter_px"] is None and row["fstop"] is None and row["fstop_bound"] is None
+
+
+def test_no_plus_minus_zero_where_there_is_no_uncertainty(circle):
+    # four identical renders: the size's spread is about nothing, the f-stop's rounds to 0.000
+    for where, text in everything(circle).items():
+        assert not ZERO_UNCERTAINTY.search(text), f"{where}: {ZERO_UNCERTAINTY.search(text).group(0)!r}"
+    assert "f-stop: at most f/2.00 (" in circle.summary()
+
+
+def test_lights_at_infinity_read_as_infinity(circle):
+    depths = [d["depth_m"] for d in circle.to_json("")["discs"] if d["depth_m"] is not None]
+    assert depths and min(depths) > 1e3, "EXIF's f/2 makes these discs only from lights very far away"
+    line = next(line for line in circle.summary().splitlines() if line.startswith("lights' distance"))
+    assert "≈ ∞" in line and "e+" not in line, line
+    text = page_text(circle)
+    assert "≈ ∞" in text and not re.search(r"\de\+\d", text)
+
+
+def test_overlay_labels_do_not_overlap(circle, monkeypatch):
+    import cv2
+
+    from bokehfit.report import overlay
+
+    drawn = []
+    real = cv2.putText
+
+    def record(canvas, text, origin, font, scale, colour, thickness, line):
+        (w, h), base = cv2.getTextSize(text, font, scale, thickness)
+        drawn.append((origin[0], origin[1] - h, origin[0] + w, origin[1] + base))
+        return real(canvas, text, origin, font, scale, colour, thickness, line)
+
+    monkeypatch.setattr(overlay.cv2, "putText", record)
+    discs = circle.search.discs
+    labels = {disc.index: "1.77e+04 m to 9.45e+05 m" for disc in discs}  # labels longer than the discs are apart
+    overlay.draw_disc_overlay(circle.photo.display, discs, labels=labels)
+    boxes = drawn[1::2]  # each label is drawn twice (outline, then colour)
+    assert len(boxes) == len(discs)
+    for i, a in enumerate(boxes):
+        for b in boxes[i + 1:]:
+            assert not (a[0] < b[2] and b[0] < a[2] and a[1] < b[3] and b[1] < a[3]), f"labels overlap: {a} {b}"
+
+
+# --------------------------------------------------------------------------------------
+# Point 3: verdicts a photographer can read
+# --------------------------------------------------------------------------------------
+
+
+def test_verdict_is_one_short_sentence_then_the_numbers(circle):
+    document = circle.to_json("")
+    verdict, details = document["verdict"], document["verdict_details"]
+    assert verdict.startswith("Sure: circle") and len(verdict) <= HEADLINE_CHARS, verdict
+    assert verdict.count(". ") == 0 and verdict.endswith(".")
+    assert "ΔBIC" not in verdict and "IoU" not in verdict, "the numbers come after the sentence"
+    assert "ΔBIC" in details and "4 discs fitted" in details
+    assert circle.summary().splitlines()[:2] == [verdict, details]
+
+
+def test_an_unsure_verdict_says_why_in_one_short_sentence(circle):
+    close = variant(circle, close_runner_up=True)
+    assert close.status == "unsure"
+    verdict = close.verdict
+    runner_up = close.fit.runner_up.family.aperture.display_name
+    assert verdict == f"Unsure: probably a circle, but a {runner_up} fits almost as well.", verdict
+    assert len(verdict) <= HEADLINE_CHARS
+    assert "evidence" not in close.verdict_details, "no 'strong evidence' beside 'fits almost as well'"
+
+
+def test_an_unsure_verdict_does_not_headline_unsupported_features(circle):
+    from bokehfit.apertures import Chromatic
+
+    weak = Chromatic(0.01, -0.01)  # 1 % ± 3 %: the discs do not support it
+    seen = circle.fit.seen_aperture.replace(chromatic=weak)
+    close = variant(circle, close_runner_up=True, aperture=circle.fit.aperture.replace(chromatic=weak), seen_aperture=seen,
+                    feature_uncertainty={"chromatic_red": 0.03, "chromatic_blue": 0.03})
+    assert close.to_json("")["aperture"]["chromatic"] is not None
+    assert "chromatic" not in close.verdict and "chromatic" not in close.summary()
+
+
+def test_one_runner_up_everywhere(circle):
+    # the best model after the circle is a rounded polygon: the same answer (round discs), not a runner-up
+    fit = circle.fit
+    assert fit.candidates[0].same_answer(fit.candidates[1]), "the photo no longer shows the case"
+    runner_up = fit.runner_up.family
+    document = circle.to_json("")
+    candidates = document["aperture"]["candidates"]
+    assert candidates[1]["name"] == runner_up.name and candidates[1]["role"] == "runner_up"
+    assert document["aperture"]["runner_up"]["name"] == runner_up.name
+    assert f"over a {runner_up.aperture.display_name} (" in document["verdict_details"]
+    ranked = next(line for line in circle.summary().splitlines() if line.startswith("runners-up:"))
+    assert ranked.startswith(f"runners-up: {runner_up.aperture.display_name} (")
+    table = build_html(circle, "").split("<h2>Candidate apertures</h2>")[1].split("</table>")[0]
+    rows = re.findall(r"<tr><td>([^<]*)</td>", table)
+    assert rows[:2] == [fit.family.name, runner_up.name]
+
+
+def test_the_row_marked_best_is_the_best(circle):
+    fit = circle.fit
+    # the chosen model set aside a model the pixels favour (as the consensus or the outlines do)
+    shifted = [dataclasses.replace(fit.candidates[0], delta_bic=fit.candidates[1].delta_bic + 10.0)] + list(fit.candidates[1:])
+    changed = variant(circle, candidates=shifted)
+    table = build_html(changed, "").split("<h2>Candidate apertures</h2>")[1].split("</table>")[0]
+    cells = [re.findall(r"<td>([^<]*)</td>", row) for row in table.split("<tr>")[2:]]
+    best = [row for row in cells if row[3] == "best"]
+    lowest = min(float(row[2]) for row in cells)
+    assert all(float(row[2]) == lowest for row in best), cells
+    assert cells[0][3].startswith("chosen"), cells[0]
+    assert abs(min(c.delta_bic for c in shifted) - lowest) <= 0.5  # the table rounds to whole ΔBIC
