@@ -84,7 +84,11 @@ def get(server, path, host=None):
 
 
 def post(server, path, body: bytes):
-    request = urllib.request.Request(server.url.rstrip("/") + path, data=body, method="POST", headers={"Content-Type": "application/json"})
+    """A POST as the viewer's page sends it: its Origin, the token of its HTML, JSON."""
+    _, _, page = get(server, "/")
+    token = re.search(rb'<meta name="bokehfit-token" content="([^"]+)">', page).group(1).decode()
+    headers = {"Content-Type": "application/json", "Origin": server.url.rstrip("/"), "X-Bokehfit-Token": token}
+    request = urllib.request.Request(server.url.rstrip("/") + path, data=body, method="POST", headers=headers)
     try:
         with urllib.request.urlopen(request, timeout=30) as response:
             return response.status, json.loads(response.read())
@@ -95,7 +99,7 @@ def post(server, path, body: bytes):
 
 def test_server_listens_on_loopback_only(server):
     assert server.url.startswith("http://127.0.0.1:") and server.port > 0
-    assert server._httpd.server_address[0] == "127.0.0.1"
+    assert server.host == "127.0.0.1"
 
 
 def test_uniform_layout_is_render_params(server):

@@ -73,10 +73,29 @@ def exchange(port: int, request: bytes, *, end_request: bool = False, timeout: f
     return parse_answer(data)
 
 
-def request(port: int, method: str = "GET", path: str = "/config.json", *, hosts=None, headers=(), body: bytes | None = None) -> bytes:
-    """An HTTP/1.1 request's bytes: ``hosts`` None means the server's own; Content-Length set for a body."""
+#: Content type of each write route.
+WRITE_TYPES = {"/matched": "application/json", "/mask": "image/png"}
+
+
+def page_token(port: int) -> str:
+    """The write token that the server's page carries (as the browser gets it); empty where it has none."""
+    page = exchange(port, request(port, "GET", "/")).body.decode()
+    match = re.search(r'<meta name="bokehfit-token" content="([^"]+)">', page)
+    return match.group(1) if match else ""
+
+
+def request(port: int, method: str = "GET", path: str = "/config.json", *, hosts=None, headers=(), body: bytes | None = None, page=None) -> bytes:
+    """An HTTP/1.1 request's bytes: ``hosts`` None means the server's own; Content-Length set for a body.
+
+    A POST is sent as the viewer's page sends it (its Origin, token and content
+    type) unless ``headers`` names them or ``page`` is False.
+    """
     lines = [f"{method} {path} HTTP/1.1"]
     lines += [f"Host: {host}" for host in ([f"127.0.0.1:{port}"] if hosts is None else hosts)]
+    named = {name.lower() for name, _ in headers}
+    if method == "POST" and page is not False and path in WRITE_TYPES:
+        own = {"origin": f"http://127.0.0.1:{port}", "x-bokehfit-token": page_token(port), "content-type": WRITE_TYPES[path]}
+        headers = [*headers, *((name, value) for name, value in own.items() if name not in named)]
     lines += [f"{name}: {value}" for name, value in headers]
     if body is not None and not any(name.lower() == "content-length" for name, _ in headers):
         lines.append(f"Content-Length: {len(body)}")

@@ -29,10 +29,10 @@ Routes
     ``mask`` names an uploaded mask (its digest) for shape ``mask``.
     Bad settings: 400 with ``{"error": message}``.
 ``POST /matched``
-    Body: a ``bokehfit compare --json`` document; answer: the viewer
+    Body (``application/json``): a ``bokehfit compare --json`` document; answer: the viewer
     settings of its fitted aperture (:func:`settings_from_compare`).
 ``POST /mask``
-    Body: an image file (PNG) of transmission, the custom ``mask`` aperture
+    Body (``image/png``): an image file (PNG) of transmission, the custom ``mask`` aperture
     of design.md §3b; the server builds its :class:`~bokehfit.apertures.MaskTable`
     (:func:`~bokehfit.apertures.mask.decode_mask`, the same code as
     ``--mask`` of the command line), keeps the last ``MAX_MASKS`` by digest
@@ -45,32 +45,50 @@ Routes
 Every other path answers 404, and a route asked with a method it does not
 serve answers 405 with ``Allow``.
 
-The server listens on 127.0.0.1 only, on a thread per connection (at most
-``MAX_CONNECTIONS`` at once), one request per connection. Each request is
-checked in one place before any route sees it: exactly one Host header, and it
-names the server (``127.0.0.1:PORT`` or ``localhost:PORT``; else 400 or 421),
-so that another web site cannot reach it through a rebound DNS name; a method
-the path serves (else 405); a request line and header block within their caps
-(414, 431); for POST a Content-Length within ``MAX_BODY_BYTES`` (411, 413). A
-client that stalls is answered 408; JSON bodies are parsed with bounded
-nesting and numbers (:func:`parse_json_body`). Every request gets a status
-line and a JSON ``{"error": message}`` body when refused; an unexpected
-failure answers 500 and logs one line on stderr.
+The server listens on 127.0.0.1 only. Its connections are served by
+:mod:`bokehfit.view.transport` on one event loop: the whole request head must
+arrive within ``REQUEST_TIMEOUT_S`` of the connection and a body within that
+plus its length at ``MIN_TRANSFER_RATE`` (408 after; a connection that sent
+nothing is closed); at most ``MAX_CONNECTIONS`` sockets, a new one closing the
+oldest idle one; one request per connection. Complete requests are answered on
+a few threads, bodies one at a time and at most ``BODY_MEMORY_BYTES`` of them
+held at once.
+
+Each request is checked in one place before any route sees it: exactly one
+Host header, and it names the server (``127.0.0.1:PORT`` or
+``localhost:PORT``; else 400 or 421), so that another web site cannot reach it
+through a rebound DNS name; a method the path serves (else 405); a request line
+and header block within their caps (414, 431); for POST, a write from the
+viewer's own page (403 else): an Origin of the server itself (or
+``Sec-Fetch-Site: same-origin``) and this run's random token, which the page
+receives in its HTML and sends back in ``X-Bokehfit-Token``; the route's
+content type (``application/json``, ``image/png``; 415 else), none of which a
+page of another site can send without a preflight; a Content-Length within
+``MAX_BODY_BYTES`` (411, 413), checked before a byte of the body is read. JSON
+bodies are scanned in linear time for their nesting and number of values
+before they are parsed (:func:`json_shape`, :func:`parse_json_body`); uploaded
+PNGs keep only their pixel chunks (:func:`png_pixels_only`). Every request gets
+a status line and a JSON ``{"error": message}`` body when refused; an
+unexpected failure answers 500 and logs one line on stderr.
 """
 
 from __future__ import annotations
 
+import gc
+import hmac
+import io
 import json
 import math
 import re
+import secrets
 import socket
-import sys
+import struct
 import threading
-import time
+import zlib
 from dataclasses import dataclass
 from functools import lru_cache
 from http import HTTPStatus
-from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from http.server import BaseHTTPRequestHandler
 from importlib import resources
 from urllib.parse import parse_qs, urlsplit
 
@@ -88,6 +106,7 @@ from bokehfit.scene.renderer import PATHTRACE_INTERFACE, RENDER_PARAMS, render_p
 from bokehfit.scene.renderer import pathtrace_source as renderer_source
 from bokehfit.scene.wgsl import scene_wgsl
 from bokehfit.validate import RANGES
+from bokehfit.view.transport import Limits, Transport, log_line
 
 __all__ = [
     "COC_DIVISOR",
@@ -96,6 +115,8 @@ __all__ = [
     "ViewerServer",
     "depth_of_field",
     "json_depth",
+    "json_shape",
+    "png_pixels_only",
     "mask_upload",
     "params_for_query",
     "parse_json_body",
@@ -142,23 +163,46 @@ MAX_REQUEST_LINE_BYTES = 8192
 #: Largest header block (names, values and separators, bytes): 431 beyond. The
 #: header parser (http.client) also stops at 100 lines of 64 KiB while reading.
 MAX_HEADER_BYTES = 32768
+#: Largest head as received (request line, headers, line breaks): the transport
+#: stops reading there and the request is answered 431 (bytes).
+MAX_HEAD_BYTES = MAX_REQUEST_LINE_BYTES + MAX_HEADER_BYTES + 1024
 #: Deepest nesting of arrays and objects in a JSON body (a compare result nests 4 deep).
 MAX_JSON_DEPTH = 32
 #: Longest integer literal in a JSON body (digits; 2**64 has 20).
 MAX_JSON_INT_DIGITS = 32
-#: A client silent for this long is answered 408 and dropped (s).
-REQUEST_TIMEOUT_S = 10.0
-#: Longest time to receive one request body, however it trickles in (s).
-BODY_DEADLINE_S = 30.0
-#: Requests answered at once; further connections wait in the listen queue.
-MAX_CONNECTIONS = 64
+#: Longest run of number characters in a JSON body, refused before parsing (below
+#: Python's int-string conversion limit of 4300 digits, which would raise mid-parse).
+MAX_JSON_NUMBER_CHARS = 4000
+#: Most values (and keys) in a JSON body. A compare result (written with indent=1)
+#: spends at least 14 bytes a value: at most 600,000 in MAX_BODY_BYTES. A million
+#: empty objects take 73 MB once parsed (2.9 MiB of text); MAX_BODY_BYTES of them
+#: would take 200 MB.
+MAX_JSON_VALUES = 1_000_000
+#: The whole request head must arrive within this long of the connection; one
+#: that sent nothing by then is closed (s).
+REQUEST_TIMEOUT_S = 5.0
+#: Slowest body or answer accepted: each has REQUEST_TIMEOUT_S plus its length
+#: at this rate (bytes/s; loopback moves gigabytes a second).
+MIN_TRANSFER_RATE = float(2**20)
+#: Sockets open at once; a new one beyond closes the oldest idle one (at most
+#: the process's file limit less a reserve: bokehfit.view.transport).
+MAX_CONNECTIONS = 1024
 LISTEN_BACKLOG = 256
+#: Bodies held in memory at once, by declared length (bytes): the others wait
+#: unread. One body at a time is parsed or decoded.
+BODY_MEMORY_BYTES = 2 * MAX_BODY_BYTES
+#: Threads that answer complete requests.
+WORKERS = 4
 #: After answering, the server reads what the client still sends (a body it
 #: refused unread) for at most this long and this much before it closes the
 #: socket, so that the close does not reset the connection before the client
 #: has read the answer (s, bytes).
 LINGER_S = 2.0
 LINGER_BYTES = MAX_BODY_BYTES
+#: The header that carries the page's token with every write, and the mark in
+#: index.html that the server replaces with the token.
+TOKEN_HEADER = "X-Bokehfit-Token"
+TOKEN_PLACEHOLDER = b"%BOKEHFIT_TOKEN%"
 
 _STATIC = {
     "/": ("index.html", "text/html; charset=utf-8"),
@@ -181,6 +225,9 @@ _ROUTES = {
 }
 #: What the body of each POST route must be, for the message when it is empty.
 _POST_BODIES = {"/matched": "a `bokehfit compare --json` result", "/mask": "an image file (PNG) of transmission"}
+#: The one content type each POST route takes: neither is one a page of another
+#: site may send without a preflight (text/plain, forms).
+_POST_TYPES = {"/matched": "application/json", "/mask": "image/png"}
 _METHODS = ("GET", "HEAD", "POST")
 
 
@@ -385,9 +432,56 @@ class MaskStore:
             return table
 
 
-def mask_upload(body: bytes, store: MaskStore) -> dict:
-    """``POST /mask``: the table of the uploaded image, kept in ``store``; its digest, size and tables' URL."""
-    table = decode_mask(body, source="the uploaded file")
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+#: The PNG chunks that make a mask's pixels (PNG 3rd edition §5.6; tRNS for palette
+#: images); the others (profiles, texts, animation) are dropped unread.
+_PNG_PIXEL_CHUNKS = (b"IHDR", b"PLTE", b"tRNS", b"IDAT", b"IEND")
+#: Most chunks in an uploaded PNG (an encoder writes a few dozen).
+MAX_PNG_CHUNKS = 100_000
+
+
+def png_pixels_only(data: bytes | bytearray, name: str = "mask", source: str = "the uploaded file") -> bytes:
+    """The PNG ``data`` with only the chunks that make its pixels: one pass over the chunk list.
+
+    A PNG's compressed ancillary chunks (iCCP, zTXt, iTXt) are inflated one by
+    one when it is opened; thousands of them in a few MiB cost seconds each
+    time. A mask needs none of them, so they go before the image is decoded.
+    """
+    unreadable = f"{name} must be a readable image file (PNG) (got {source}: "
+    if bytes(data[:8]) != _PNG_SIGNATURE:
+        raise InputError(unreadable + "not a PNG)")
+    view = memoryview(data)
+    kept, offset, chunks = [view[:8]], 8, 0
+    while offset + 12 <= len(data):
+        length = int.from_bytes(view[offset : offset + 4], "big")
+        kind = bytes(view[offset + 4 : offset + 8])
+        end = offset + 12 + length
+        if end > len(data):
+            raise InputError(unreadable + f"chunk {kind!r} runs past the end of the file)")
+        chunks += 1
+        if chunks > MAX_PNG_CHUNKS:
+            raise InputError(unreadable + f"more than {MAX_PNG_CHUNKS} chunks)")
+        if kind in _PNG_PIXEL_CHUNKS:
+            kept.append(view[offset:end])
+        offset = end
+        if kind == b"IEND":
+            break
+    return b"".join(kept)
+
+
+def mask_upload(body: bytes | bytearray, store: MaskStore) -> dict:
+    """``POST /mask``: the table of the uploaded PNG, kept in ``store``; its digest, size and tables' URL.
+
+    The image is read by the command line's code (:func:`~bokehfit.apertures.mask.decode_mask`)
+    from its pixel chunks (:func:`png_pixels_only`); a decoder's failure on a damaged file is one line.
+    """
+    pixels = png_pixels_only(body)
+    try:
+        table = decode_mask(pixels, source="the uploaded file")
+    except InputError:
+        raise
+    except (ValueError, SyntaxError, EOFError, MemoryError, struct.error, zlib.error) as error:  # Pillow on damaged data
+        raise InputError(f"mask must be a readable image file (PNG) (got the uploaded file: {_brief(str(error), 120)})") from None
     store.add(table)
     height, width = table.shape
     return {
@@ -457,6 +551,7 @@ def viewer_config(scene_name: str = "cornell", size: tuple[int, int] = DEFAULT_S
         "exposure_ev": 0.0,
         "coc_divisor": COC_DIVISOR,
         "mask_upload": {"url": "/mask", "max_bytes": MAX_BODY_BYTES, "max_side": MAX_MASK_SIDE},
+        "write_token_header": TOKEN_HEADER,
         "fallback_command": f"bokehfit render --scene {scene_name} --out frame.png",
     }
 
@@ -561,35 +656,116 @@ def _finite_number(name: str, value) -> float:
     raise InputError(f"{name} must be a finite number (got {_brief(value)})")
 
 
-# A JSON string literal (RFC 8259 §7), as the unrolled loop "[^"\\]*(\\.[^"\\]*)*": linear time.
-_JSON_STRING = re.compile(rb'"[^"\\]*(?:\\.[^"\\]*)*"', re.DOTALL)
+#: Bytes the JSON scanner looks at in one step (its temporaries are a few times this).
+_SCAN_CHUNK = 1 << 18
+#: The class of each byte value, one bit a class, so that one table lookup sorts a step's bytes.
+_OPEN, _CLOSE, _SEPARATOR, _NUMBER, _QUOTE, _BACKSLASH = (1 << i for i in range(6))
+_BYTE_CLASS = np.zeros(256, dtype=np.uint8)
+for _chars, _class in ((b"[{", _OPEN), (b"]}", _CLOSE), (b",:", _SEPARATOR), (b"0123456789+-.eE", _NUMBER), (b'"', _QUOTE), (b"\\", _BACKSLASH)):
+    _BYTE_CLASS[list(_chars)] = _class
+#: An exponent of three digits or more: the only way a number of a few characters leaves the float range.
+_BIG_EXPONENT = re.compile(rb"[eE][-+]?[0-9]{3}")
 
 
-def json_depth(body: bytes) -> int:
-    """Deepest nesting of arrays and objects in the JSON text ``body``, brackets in strings not counted.
+@dataclass(frozen=True)
+class JsonShape:
+    """What :func:`json_shape` counts in a JSON text, without parsing it."""
 
-    Counted without parsing (a running sum of opening minus closing brackets),
-    so that a body nested 100,000 deep is refused before any recursion.
+    depth: int  #: deepest nesting of arrays and objects
+    values: int  #: an upper bound of the values and keys: separators and openings outside strings, plus one
+    longest_number: int  #: characters of the longest run of number characters (0-9 + - . e E) outside strings
+    longest_number_end: int  #: index just past that run
+
+
+def _run_ends(mask: np.ndarray, index: np.ndarray, carried: int) -> np.ndarray:
+    """For each byte, the index of the last byte at or before it outside ``mask``; before the step, -1 - ``carried``.
+
+    ``i - result[i]`` is then the length of the run of ``mask`` bytes ending at ``i``
+    (counting the ``carried`` ones of the step before).
     """
-    outside_strings = np.frombuffer(_JSON_STRING.sub(b'""', body), dtype=np.uint8)
-    opens = np.isin(outside_strings, np.frombuffer(b"[{", dtype=np.uint8))
-    closes = np.isin(outside_strings, np.frombuffer(b"]}", dtype=np.uint8))
-    steps = opens.astype(np.int64) - closes
-    return int(np.cumsum(steps).max(initial=0))
+    return np.maximum.accumulate(np.where(mask, np.int32(-1 - carried), index))
 
 
-def parse_json_body(body: bytes, *, max_depth: int = MAX_JSON_DEPTH, max_int_digits: int = MAX_JSON_INT_DIGITS):
-    """A request body parsed as strict JSON, with bounded nesting and numbers.
+def json_shape(body: bytes | bytearray) -> JsonShape:
+    """Nesting depth, number of values and longest number of the JSON text ``body``, strings left out.
+
+    One pass in fixed steps, linear in the length whatever the bytes: a quote
+    is the end of a string unless an odd run of backslashes precedes it (the
+    JSON escapes; outside strings a backslash is an error that parsing
+    reports), so strings are found without a regular expression that could
+    backtrack, and nothing is recursed into.
+    """
+    data = np.frombuffer(body, dtype=np.uint8)
+    backslashes = 0  # the run of backslashes that ends the step before (its parity is what counts)
+    number = 0  # the run of number characters that ends the step before
+    inside = 0  # this step starts inside a string
+    depth = deepest = values = longest = longest_end = 0
+    for start in range(0, len(data), _SCAN_CHUNK):
+        kind = _BYTE_CLASS[data[start : start + _SCAN_CHUNK]]
+        index = np.arange(len(kind), dtype=np.int32)
+        last_other = _run_ends((kind & _BACKSLASH).astype(bool), index, backslashes & 1)
+        run_before = index - 1 - np.concatenate(([np.int32(-1 - (backslashes & 1))], last_other[:-1]))
+        quote = (kind & _QUOTE).astype(bool) & ((run_before & 1) == 0)
+        in_string = ((np.cumsum(quote, dtype=np.int32) + inside) & 1).astype(bool)
+        kind[in_string | quote] = 0  # what is left is outside strings
+        opens = (kind & _OPEN).astype(bool)
+        steps = opens.astype(np.int8) - (kind & _CLOSE).astype(bool)
+        level = depth + np.cumsum(steps, dtype=np.int32)
+        deepest = max(deepest, int(level.max()))
+        depth = int(level[-1])
+        values += int(np.count_nonzero(kind & (_OPEN | _SEPARATOR)))
+        runs = index - _run_ends((kind & _NUMBER).astype(bool), index, number)
+        end = int(np.argmax(runs))
+        if runs[end] > longest:
+            longest, longest_end = int(runs[end]), start + end + 1
+        inside = int(in_string[-1])
+        backslashes = int(len(kind) - 1 - last_other[-1])
+        number = int(runs[-1])
+    return JsonShape(deepest, values + 1, longest, longest_end)
+
+
+def json_depth(body: bytes | bytearray) -> int:
+    """Deepest nesting of arrays and objects in the JSON text ``body`` (:func:`json_shape`)."""
+    return json_shape(body).depth
+
+
+def _check_numbers(value, max_int_digits: int) -> None:
+    """Raise ``InputError`` at the first integer longer than ``max_int_digits`` or float beyond the float range in ``value``.
+
+    A walk without recursion over the parsed value, for the bodies whose
+    numbers :func:`json_shape` could not clear.
+    """
+    limit = 10**max_int_digits
+    pending = [value]
+    while pending:
+        item = pending.pop()
+        children = item.values() if isinstance(item, dict) else item
+        for child in children:
+            kind = type(child)
+            if kind is int and not -limit < child < limit:
+                raise InputError(f"the body is not JSON: an integer of {len(str(abs(child)))} digits (at most {max_int_digits})")
+            if kind is float and not math.isfinite(child):
+                raise InputError("the body is not JSON: a number is beyond the float range")
+            if kind is list or kind is dict:
+                pending.append(child)
+
+
+def parse_json_body(
+    body: bytes | bytearray, *, max_depth: int = MAX_JSON_DEPTH, max_int_digits: int = MAX_JSON_INT_DIGITS, max_values: int = MAX_JSON_VALUES
+):
+    """A request body parsed as strict JSON, with bounded nesting, size and numbers, in time linear in its length.
 
     Parameters
     ----------
     body : bytes
         UTF-8 JSON text.
     max_depth : int
-        Deepest nesting of arrays and objects accepted (see :func:`json_depth`).
+        Deepest nesting of arrays and objects accepted (see :func:`json_shape`).
     max_int_digits : int
-        Longest integer literal accepted (digits), well below Python's
-        int-string conversion limit (4300 digits), which would raise mid-parse.
+        Longest integer literal accepted (digits).
+    max_values : int
+        Most values and keys accepted (:func:`json_shape`): what bounds the
+        parse's time and memory, whatever the body's length.
 
     Returns
     -------
@@ -599,39 +775,56 @@ def parse_json_body(body: bytes, *, max_depth: int = MAX_JSON_DEPTH, max_int_dig
     Raises
     ------
     InputError
-        One line starting "the body is not JSON" where the body is not UTF-8,
-        not JSON, nested too deep, or holds NaN, ±Infinity, a float beyond the
+        One line where the body is not UTF-8, not JSON, nested too deep,
+        holds too many values, or holds NaN, ±Infinity, a float beyond the
         float range (1e999) or a longer integer.
+
+    Notes
+    -----
+    The body is scanned first (:func:`json_shape`: depth, values, the longest
+    number) and refused there if it can be; then parsed by the standard
+    library's C parser, numbers included (a Python hook per number would cost
+    more than 0.1 s per MiB of short numbers), with the cyclic garbage
+    collector paused (it would walk every new list again and again, for
+    nothing: parsed JSON holds no cycles). Only where a number may be out
+    of bounds (one longer than ``max_int_digits`` characters, or an exponent
+    of three digits) are the parsed numbers checked, in one walk.
     """
-
-    def bounded_int(text: str) -> int:
-        digits = len(text.lstrip("-"))
-        if digits > max_int_digits:
-            raise ValueError(f"an integer of {digits} digits (at most {max_int_digits})")
-        return int(text)
-
-    def finite_float(text: str) -> float:
-        value = float(text)
-        if not math.isfinite(value):
-            raise ValueError(f"the number {text[:20]}{'…' if len(text) > 20 else ''} is beyond the float range")
-        return value
 
     def no_constant(name: str):
         raise ValueError(f"{name} is not a JSON number")
 
+    shape = json_shape(body)  # before decoding: a refused body costs no more memory
+    if shape.depth > max_depth:
+        raise InputError(f"the body nests {shape.depth} deep: at most {max_depth} is read")
+    if shape.values > max_values:
+        raise InputError(f"the body holds about {shape.values} values: at most {max_values} are read")
+    if shape.longest_number > MAX_JSON_NUMBER_CHARS:  # before Python's own int-string limit (4300 digits)
+        token = bytes(body[shape.longest_number_end - shape.longest_number : shape.longest_number_end])
+        if re.fullmatch(rb"-?[0-9]+", token):
+            raise InputError(f"the body is not JSON: an integer of {len(token.lstrip(b'-'))} digits (at most {max_int_digits})")
+        raise InputError(f"the body is not JSON: a number of {len(token)} characters (at most {MAX_JSON_NUMBER_CHARS})")
     try:
         text = body.decode("utf-8")
     except UnicodeDecodeError as error:
         raise InputError(f"the body is not JSON: it is not UTF-8 (byte {error.start})") from None
-    depth = json_depth(body)
-    if depth > max_depth:
-        raise InputError(f"the body nests {depth} deep: at most {max_depth} is read")
+    collecting = gc.isenabled()
+    gc.disable()  # parsed JSON holds no cycles: the collector's passes over a million new lists are waste
     try:
-        return json.loads(text, parse_int=bounded_int, parse_float=finite_float, parse_constant=no_constant)
+        value = json.loads(text, parse_constant=no_constant)
     except RecursionError:  # not reached after the depth check; kept as the last guard
         raise InputError(f"the body nests deeper than {max_depth}: at most {max_depth} is read") from None
-    except ValueError as error:  # JSONDecodeError and the hooks' refusals
+    except ValueError as error:  # JSONDecodeError and the hook's refusal
         raise InputError(f"the body is not JSON: {error}") from None
+    finally:
+        if collecting:
+            gc.enable()
+    if shape.longest_number > max_int_digits or _BIG_EXPONENT.search(body):
+        if isinstance(value, (list, dict)):
+            _check_numbers(value, max_int_digits)
+        else:
+            _check_numbers([value], max_int_digits)
+    return value
 
 
 def settings_from_compare(document: dict) -> dict:
@@ -728,23 +921,44 @@ class _Refused(Exception):
         self.headers = headers
 
 
-class _Handler(BaseHTTPRequestHandler):
-    """One request per connection: read, validate in :meth:`_check_request`, route, always answer."""
+class _Site:
+    """What every request of one server shares: its names, its token, its masks and its settings."""
 
-    server: _HTTPServer
+    def __init__(self, port: int, scene_name: str, size: tuple[int, int], verbose: bool, request_timeout_s: float):
+        self.scene_name = scene_name
+        self.size = size
+        self.verbose = verbose
+        self.request_timeout_s = request_timeout_s
+        self.masks = MaskStore()
+        self.own_hosts = (f"127.0.0.1:{port}", f"localhost:{port}")
+        self.own_origins = tuple(f"http://{host}" for host in self.own_hosts)
+        #: The per-run secret the page sends back with every write (in the page it is served).
+        self.token = secrets.token_urlsafe(32)
+
+
+class _Handler(BaseHTTPRequestHandler):
+    """One request: its head checked in :meth:`begin` (on the event loop), its route run in :meth:`respond`.
+
+    The standard library's request parsing and answering, on the bytes the
+    transport (:mod:`bokehfit.view.transport`) collected: ``rfile`` holds the
+    head, ``wfile`` collects the answer, which the transport sends.
+    """
+
     server_version = f"bokehfit-view/{__version__}"
 
-    @property
-    def timeout(self) -> float:  # read by StreamRequestHandler.setup: the socket's timeout
-        return self.server.request_timeout_s
+    def __init__(self, site: _Site):  # not BaseHTTPRequestHandler's: no socket, no handle() on construction
+        self.server = site
+        self.client_address = ("127.0.0.1", 0)
+        self.rfile = io.BytesIO()
+        self.wfile = io.BytesIO()
+        self.command, self.requestline, self.request_version = "", "", "HTTP/1.0"
+        self.close_connection = True  # one request per connection
+        self._answered = False
+        self._route = None
 
     def log_message(self, format, *args):  # quiet unless --verbose: keep the terminal clean
         if self.server.verbose:
             super().log_message(format, *args)
-
-    def _log_line(self, message: str) -> None:
-        """One line on stderr, verbose or not: a failure the user should report."""
-        print(f"bokehfit view: {message}", file=sys.stderr, flush=True)
 
     # --- answering --------------------------------------------------------------------------
 
@@ -777,61 +991,66 @@ class _Handler(BaseHTTPRequestHandler):
         self._error(status, f"{status.phrase}: {message}" if message else status.phrase)
 
     def _answer_late(self, status: HTTPStatus, message: str, headers: tuple[tuple[str, str], ...] = ()) -> None:
-        """Answer a failure unless an answer has started; a client gone already gets nothing."""
-        if self._answered:
-            return
-        try:
+        """Answer a failure unless an answer has started."""
+        if not self._answered:
             self._error(status, message, headers)
-        except OSError:
-            pass
 
-    # --- one request ------------------------------------------------------------------------
+    def _internal(self, error: Exception) -> None:
+        """A bug: one line on stderr, 500 to the client."""
+        log_line(f"internal error answering {self.requestline[:200]!r}: {type(error).__name__}: {error}")
+        self._answer_late(HTTPStatus.INTERNAL_SERVER_ERROR, f"internal error: {type(error).__name__} (see the terminal of `bokehfit view`)")
 
-    def handle_one_request(self) -> None:
-        """Read one request, validate it, answer it; nothing escapes as a traceback."""
-        self.close_connection = True  # one request per connection
-        self.command, self.requestline, self.request_version = "", "", "HTTP/1.0"
-        self._answered = False
+    # --- the transport's side (bokehfit.view.transport.Exchange) ----------------------------
+
+    def begin(self, head: bytes, too_large: bool) -> int | None:
+        """Read and check the head; the body's length to read (0: none), or None where the answer is ready."""
+        self.rfile = io.BytesIO(head)
         try:
-            try:
-                if not self.connection.recv(1, socket.MSG_PEEK):
-                    return  # the client closed without asking
-            except TimeoutError:
-                return  # an idle connection (a browser's preconnect): no request to answer
             self.raw_requestline = self.rfile.readline(MAX_REQUEST_LINE_BYTES + 1)
-            if not self.raw_requestline:
-                return  # the client closed without asking
             if len(self.raw_requestline) > MAX_REQUEST_LINE_BYTES:
                 raise _Refused(HTTPStatus.REQUEST_URI_TOO_LONG, f"the request line must be at most {MAX_REQUEST_LINE_BYTES} bytes")
             if not self.raw_requestline.endswith(b"\n"):
                 raise _Refused(HTTPStatus.BAD_REQUEST, "the request line ended without a line break")
             if not self.raw_requestline.strip():
                 raise _Refused(HTTPStatus.BAD_REQUEST, "the request line is empty")
+            if too_large:
+                raise _Refused(HTTPStatus.REQUEST_HEADER_FIELDS_TOO_LARGE, f"the headers must be at most {MAX_HEADER_BYTES} bytes")
             if not self.parse_request():
-                return  # parse_request answered through send_error
+                return None  # parse_request answered through send_error
             if self.request_version == "HTTP/0.9":
                 self.request_version = "HTTP/1.0"  # answer with a status line all the same
                 raise _Refused(HTTPStatus.BAD_REQUEST, "the request line must end with HTTP/1.0 or HTTP/1.1")
-            route = self._check_request()
-            route()
+            self._route, length = self._check_request()
+            return length
         except _Refused as refused:
             self._answer_late(refused.status, refused.message, refused.headers)
-        except TimeoutError:
-            self._answer_late(HTTPStatus.REQUEST_TIMEOUT, f"the request did not arrive within {self.server.request_timeout_s:g} s")
-        except ConnectionError:
-            pass  # the client hung up: nobody to answer
-        except Exception as error:  # a bug: one line on stderr, 500 to the client
-            self._log_line(f"internal error answering {self.requestline[:200]!r}: {type(error).__name__}: {error}")
-            self._answer_late(HTTPStatus.INTERNAL_SERVER_ERROR, f"internal error: {type(error).__name__} (see the terminal of `bokehfit view`)")
+        except Exception as error:
+            self._internal(error)
+        return None
+
+    def respond(self, body: bytes | bytearray) -> None:
+        """Run the route of a request that :meth:`begin` accepted, its body read."""
         try:
-            self.wfile.flush()
-        except OSError:
-            pass
+            self._route(body)
+        except _Refused as refused:
+            self._answer_late(refused.status, refused.message, refused.headers)
+        except InputError as error:
+            self._answer_late(HTTPStatus.BAD_REQUEST, str(error))
+        except Exception as error:
+            self._internal(error)
+
+    def refuse(self, status: int, message: str) -> None:
+        self._answer_late(HTTPStatus(status), message)
+
+    def output(self) -> bytes:
+        return self.wfile.getvalue()
+
+    # --- the one gate -----------------------------------------------------------------------
 
     def _check_request(self):
-        """The one gate before any route: Host, target, method, header size, body headers.
+        """The one gate before any route: Host, target, method, header size, body headers, writes.
 
-        Returns the bound method that answers the request; raises ``_Refused``.
+        Returns the bound method that answers the request and the body's length; raises ``_Refused``.
         """
         hosts = self.headers.get_all("Host") or []
         if len(hosts) != 1:
@@ -856,9 +1075,42 @@ class _Handler(BaseHTTPRequestHandler):
         if self.headers.get_all("Transfer-Encoding"):
             raise _Refused(HTTPStatus.LENGTH_REQUIRED, "send the body with a Content-Length (Transfer-Encoding is not read)")
         if self.command == "POST":
-            length = self._content_length()
-            return lambda: self._post(length)
-        return self._get
+            self._check_write(url.path)
+            return self._post, self._content_length()
+        return self._get, 0
+
+    def _one_header(self, name: str) -> str | None:
+        """The value of header ``name``, None where absent; refused where it is given twice."""
+        values = self.headers.get_all(name) or []
+        if len(values) > 1:
+            raise _Refused(HTTPStatus.BAD_REQUEST, f"a request must carry at most one {name} header (got {len(values)})")
+        return values[0].strip() if values else None
+
+    def _check_write(self, path: str) -> None:
+        """A write comes from the viewer's own page: its Origin, its token and the route's content type.
+
+        A page of another site can make the browser send a POST here (the
+        browser names the right Host), but only a "simple" one: without
+        custom headers and with a form or text content type, and with its own
+        Origin. The token is in the served page only (another site cannot
+        read it: no CORS), and any other content type or the token header
+        would need a preflight (OPTIONS, answered 405).
+        """
+        origin = self._one_header("Origin")
+        site = self._one_header("Sec-Fetch-Site")
+        if origin is not None and origin.lower() not in self.server.own_origins:
+            raise _Refused(HTTPStatus.FORBIDDEN, f"writes are taken from the viewer's own page only (Origin {_brief(origin)})")
+        if site is not None and site.lower() != "same-origin":
+            raise _Refused(HTTPStatus.FORBIDDEN, f"writes are taken from the viewer's own page only (Sec-Fetch-Site {_brief(site)})")
+        if origin is None and site is None:
+            raise _Refused(HTTPStatus.FORBIDDEN, "a write must carry the Origin of the viewer's page (or Sec-Fetch-Site: same-origin)")
+        token = self._one_header(TOKEN_HEADER)
+        if token is None or not hmac.compare_digest(token.encode("latin-1"), self.server.token.encode("latin-1")):
+            raise _Refused(HTTPStatus.FORBIDDEN, f"a write must carry this run's {TOKEN_HEADER} of the page: reload the page")
+        wanted = _POST_TYPES[path]
+        given = self._one_header("Content-Type")
+        if given is None or given.split(";")[0].strip().lower() != wanted:
+            raise _Refused(HTTPStatus.UNSUPPORTED_MEDIA_TYPE, f"POST {path} takes Content-Type: {wanted} (got {_brief(given)})")
 
     def _content_length(self) -> int:
         """The POST body's declared length: one Content-Length, 1 byte to MAX_BODY_BYTES."""
@@ -874,32 +1126,20 @@ class _Handler(BaseHTTPRequestHandler):
             raise _Refused(HTTPStatus.BAD_REQUEST, f"the body is empty: send {_POST_BODIES[urlsplit(self.path).path]}")
         return int(digits)
 
-    def _read_body(self, length: int) -> bytes:
-        """``length`` bytes of body, within BODY_DEADLINE_S however slowly they come."""
-        deadline = time.monotonic() + BODY_DEADLINE_S
-        chunks, remaining = [], length
-        while remaining:
-            if time.monotonic() > deadline:
-                raise TimeoutError(f"the body took longer than {BODY_DEADLINE_S:g} s")
-            chunk = self.rfile.read1(min(remaining, 1 << 16))
-            if not chunk:
-                raise _Refused(HTTPStatus.BAD_REQUEST, f"the body ended after {length - remaining} of {length} bytes")
-            chunks.append(chunk)
-            remaining -= len(chunk)
-        return b"".join(chunks)
-
     # --- the routes -------------------------------------------------------------------------
 
-    def _get(self) -> None:
+    def _get(self, body: bytes) -> None:
         url = urlsplit(self.path)
         try:
             if url.path in _STATIC:
                 name, content_type = _STATIC[url.path]
-                body = resources.files("bokehfit.view").joinpath("static", name).read_bytes()
-                return self._send(HTTPStatus.OK, body, content_type)
+                page = resources.files("bokehfit.view").joinpath("static", name).read_bytes()
+                if name == "index.html":
+                    page = page.replace(TOKEN_PLACEHOLDER, self.server.token.encode("ascii"))
+                return self._send(HTTPStatus.OK, page, content_type)
             if url.path == "/pathtrace.wgsl":
-                body = _pathtrace_source_cached(self.server.scene_name, False).encode("utf-8")
-                return self._send(HTTPStatus.OK, body, "text/wgsl; charset=utf-8")
+                source = _pathtrace_source_cached(self.server.scene_name, False).encode("utf-8")
+                return self._send(HTTPStatus.OK, source, "text/wgsl; charset=utf-8")
             if url.path == "/config.json":
                 return self._json(HTTPStatus.OK, viewer_config(self.server.scene_name, self.server.size))
             if url.path == "/params.json":
@@ -913,80 +1153,25 @@ class _Handler(BaseHTTPRequestHandler):
             return self._error(HTTPStatus.BAD_REQUEST, str(error))
         raise RuntimeError(f"route {url.path!r} is in _ROUTES but has no answer")
 
-    def _post(self, length: int) -> None:  # /matched and /mask
-        path = urlsplit(self.path).path
-        body = self._read_body(length)
-        try:
-            if path == "/mask":
-                return self._json(HTTPStatus.OK, mask_upload(body, self.server.masks))
-            return self._json(HTTPStatus.OK, settings_from_compare(parse_json_body(body)))
-        except InputError as error:
-            return self._error(HTTPStatus.BAD_REQUEST, str(error))
-
-
-class _HTTPServer(ThreadingHTTPServer):
-    """A thread per connection, at most MAX_CONNECTIONS at once; failures logged as one line."""
-
-    daemon_threads = True
-    # Closing does not wait for handler threads: one may sit on an idle browser
-    # connection until its timeout, and Ctrl-C must stop the server at once.
-    block_on_close = False
-    allow_reuse_address = True
-    request_queue_size = LISTEN_BACKLOG
-
-    def __init__(self, address, scene_name: str, size: tuple[int, int], verbose: bool, request_timeout_s: float):
-        self.scene_name = scene_name
-        self.size = size
-        self.verbose = verbose
-        self.request_timeout_s = request_timeout_s
-        self.masks = MaskStore()
-        self._slots = threading.BoundedSemaphore(MAX_CONNECTIONS)
-        super().__init__(address, _Handler)
-        port = self.server_address[1]
-        self.own_hosts = (f"127.0.0.1:{port}", f"localhost:{port}")
-
-    def process_request(self, request, client_address):
-        self._slots.acquire()  # waits while MAX_CONNECTIONS are being answered
-        try:
-            super().process_request(request, client_address)
-        except BaseException:
-            self._slots.release()
-            raise
-
-    def process_request_thread(self, request, client_address):
-        try:
-            super().process_request_thread(request, client_address)
-        finally:
-            self._slots.release()
-
-    def shutdown_request(self, request):
-        """Close after a lingering read, so that a client still sending gets the answer, not a reset."""
-        try:
-            request.shutdown(socket.SHUT_WR)
-            request.settimeout(LINGER_S)
-            deadline, drained = time.monotonic() + LINGER_S, 0
-            while drained < LINGER_BYTES and time.monotonic() < deadline:
-                chunk = request.recv(1 << 16)
-                if not chunk:
-                    break
-                drained += len(chunk)
-        except OSError:
-            pass
-        self.close_request(request)
-
-    def handle_error(self, request, client_address):
-        """An exception outside a request's own handling: one line, no traceback; hang-ups are silent."""
-        error = sys.exc_info()[1]
-        if not isinstance(error, (ConnectionError, TimeoutError)):
-            print(f"bokehfit view: internal error on a connection: {type(error).__name__}: {error}", file=sys.stderr, flush=True)
+    def _post(self, body: bytes | bytearray) -> None:  # /matched and /mask
+        # One body at a time reaches here (the transport answers bodies on one thread).
+        if urlsplit(self.path).path == "/mask":
+            answer = mask_upload(body, self.server.masks)
+        else:
+            answer = settings_from_compare(parse_json_body(body))
+        self._json(HTTPStatus.OK, answer)
 
 
 class ViewerServer:
     """The viewer's HTTP server on 127.0.0.1 (``port=0``: any free port).
 
-    ``request_timeout_s``: a client silent for this long is answered 408.
-    Use ``serve_forever()`` in the foreground, or ``start()`` for a
-    background thread (tests); ``close()`` stops it. A context manager.
+    ``request_timeout_s``: the whole request head must arrive within this
+    long of the connection (408 after; a connection that sent nothing is
+    closed), and a body within this long plus its length at
+    ``MIN_TRANSFER_RATE`` bytes/s. ``max_connections``: sockets open at once
+    (idle ones are closed to make room). Use ``serve_forever()`` in the
+    foreground, or ``start()`` for a background thread (tests); ``close()``
+    stops it. A context manager.
 
     Examples
     --------
@@ -1003,29 +1188,59 @@ class ViewerServer:
         size: tuple[int, int] = DEFAULT_SIZE,
         verbose: bool = False,
         request_timeout_s: float = REQUEST_TIMEOUT_S,
+        max_connections: int = MAX_CONNECTIONS,
     ):
         if isinstance(port, bool) or not isinstance(port, int) or not 0 <= port <= 65535:
             raise InputError(f"port must be an integer from 0 to 65535 (got {port!r})")
         if check_finite("request_timeout_s", request_timeout_s) <= 0:
             raise InputError(f"request_timeout_s must be greater than 0 (got {request_timeout_s!r})")
+        if isinstance(max_connections, bool) or not isinstance(max_connections, int) or max_connections < 1:
+            raise InputError(f"max_connections must be a positive integer (got {max_connections!r})")
         if scene not in SCENES or not isinstance(build_scene(scene), Scene):
             raise InputError(f"the viewer path-traces the scene 'cornell' (got {scene!r})")
         make_settings(size[0], size[1], 1)  # validates the size
         # Build the shader now: a broken install fails here, not in the browser.
         _pathtrace_source_cached(scene, False)
-        self._httpd = _HTTPServer(("127.0.0.1", port), scene, tuple(size), verbose, float(request_timeout_s))
+        self._listener = socket.create_server(("127.0.0.1", port), backlog=LISTEN_BACKLOG)
+        self.site = _Site(self.port, scene, tuple(size), verbose, float(request_timeout_s))
+        limits = Limits(
+            request_timeout_s=float(request_timeout_s),
+            min_rate_bytes_per_s=MIN_TRANSFER_RATE,
+            max_head_bytes=MAX_HEAD_BYTES,
+            max_connections=max_connections,
+            body_memory_bytes=BODY_MEMORY_BYTES,
+            workers=WORKERS,
+            linger_s=LINGER_S,
+            linger_bytes=LINGER_BYTES,
+        )
+        self._transport = Transport(self._listener, lambda: _Handler(self.site), limits, log_line)
         self._thread: threading.Thread | None = None
 
     @property
+    def host(self) -> str:
+        return self._listener.getsockname()[0]
+
+    @property
     def port(self) -> int:
-        return self._httpd.server_address[1]
+        return self._listener.getsockname()[1]
 
     @property
     def url(self) -> str:
         return f"http://127.0.0.1:{self.port}/"
 
+    @property
+    def token(self) -> str:
+        """This run's write token (the page receives it in its HTML)."""
+        return self.site.token
+
+    @property
+    def max_connections(self) -> int:
+        """Sockets open at once: ``max_connections``, or fewer where the process's file limit is lower."""
+        return self._transport.cap
+
     def serve_forever(self) -> None:
-        self._httpd.serve_forever(poll_interval=0.2)
+        """Serve until :meth:`close` (from another thread) or Ctrl-C (KeyboardInterrupt)."""
+        self._transport.run()
 
     def start(self) -> ViewerServer:
         """Serve from a daemon thread; returns self."""
@@ -1035,11 +1250,11 @@ class ViewerServer:
 
     def close(self) -> None:
         """Stop serving (if started in a thread) and close the socket."""
+        self._transport.stop()
         if self._thread is not None:
-            self._httpd.shutdown()
             self._thread.join()
             self._thread = None
-        self._httpd.server_close()
+        self._listener.close()
 
     def __enter__(self) -> ViewerServer:
         return self

@@ -65,6 +65,13 @@ fn tonemap(@builtin(global_invocation_id) gid: vec3u) {
 
 class NoWebGPU extends Error {}
 
+// A write (POST) names its content type and carries this run's token from the served page
+// (the server refuses writes without both, so that no other web site can make them).
+function writeHeaders(config, contentType) {
+  const token = document.querySelector('meta[name="bokehfit-token"]').content;
+  return { "Content-Type": contentType, [config.write_token_header]: token };
+}
+
 async function fetchJSON(url, options) {
   const response = await fetch(url, options);
   const data = await response.json();
@@ -854,7 +861,7 @@ class Viewer {
     if (!file) return;
     try {
       const text = await file.text();
-      const m = await fetchJSON("/matched", { method: "POST", headers: { "Content-Type": "application/json" }, body: text });
+      const m = await fetchJSON("/matched", { method: "POST", headers: writeHeaders(this.config, "application/json"), body: text });
       this.state.shape = m.shape;
       this.state.angle_deg = m.angle_deg;
       if (m.blades !== null) this.state.blades = m.blades;
@@ -887,7 +894,7 @@ class Viewer {
     if (!file) return;
     try {
       const body = await file.arrayBuffer();
-      const m = await fetchJSON(this.config.mask_upload.url, { method: "POST", headers: { "Content-Type": "image/png" }, body });
+      const m = await fetchJSON(this.config.mask_upload.url, { method: "POST", headers: writeHeaders(this.config, "image/png"), body });
       const response = await fetch(m.table_url);
       if (!response.ok) throw new Error(`${m.table_url}: HTTP ${response.status}`);
       const table = new Float32Array(await response.arrayBuffer());
