@@ -117,13 +117,20 @@ _TARGET_KEYS = ("warm_s", "warm_over_decode", "cold_process_s", "load_detect_ove
 
 
 def target_table(result: dict) -> tuple[list[str], list[list[str]]]:
-    """(header, rows): each figure the targets speak of, measured, beside its target and whether it is met."""
+    """(header, rows): each figure the targets speak of, measured, beside its target and whether it is met.
+
+    The targets are for one photo size (``targets_photo``); a run that measured another size (``--quick``)
+    has none, and its rows say "not judged" rather than comparing figures of different sizes.
+    """
     c = result["compare"]
     targets = c.get("targets", {})
-    header = ["figure", "measured", "target (24 MP, 2 cores)", "met"]
+    header = ["figure", "measured", f"target ({c.get('targets_photo', '24 MP')}, 2 cores)", "met"]
     rows = []
     for (label, key, fmt, unit), target_key in zip(_TARGET_ROWS, _TARGET_KEYS):
         value, target = c.get(key), targets.get(target_key)
+        if not targets:
+            rows.append([label, _num(value, fmt) + unit, "— (not this photo's size)", "not judged"])
+            continue
         met = "—" if value is None or target is None else ("yes" if value <= target else "no")
         rows.append([label, _num(value, fmt) + unit, "—" if target is None else f"≤ {target:g}{unit}", met])
     return header, rows
@@ -202,7 +209,8 @@ def format_tables(result: dict) -> str:
             f"bokehfit.compare {c['cold_import_s']:.2f} s, start to exit {c['cold_process_s']:.2f} s",
         ]
         if "decode_s" in c:
-            out += ["", markdown_table(*target_table(result)), "", _memory_line(c)]
+            out += ["", markdown_table(*target_table(result))] + (["", c["targets_note"]] if c.get("targets_note") else [])
+            out += ["", _memory_line(c)]
     ran = ", ".join(f"{name} {runtime[name]:.1f} s" for name in ("kernel", "fit", "compare") if name in runtime)
     out += ["", f"bench run time: {ran}, total {runtime['total']:.1f} s"]
     return "\n".join(out)
@@ -382,7 +390,10 @@ def build_html(result: dict) -> str:
             _table(*compare_table(result)),
         ]
         if "decode_s" in c:
-            parts += [_table(*target_table(result)), f"<p class='note'>{html.escape(_memory_line(c))}</p>"]
+            parts += [_table(*target_table(result))]
+            if c.get("targets_note"):
+                parts.append(f"<p class='note'>{html.escape(c['targets_note'])}</p>")
+            parts.append(f"<p class='note'>{html.escape(_memory_line(c))}</p>")
     parts += [
         f"<p><small>{html.escape(result['command_line'])}; bokehfit {html.escape(result['bokehfit_version'])}, "
         f"schema_version {result['schema_version']}</small></p></body></html>",
