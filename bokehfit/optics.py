@@ -73,12 +73,11 @@ def _check_geometry(focal_length_mm: float, focus_distance_m: float, light_dista
     f = check("focal_length_mm", focal_length_mm)
     focus = check("focus_distance_m", focus_distance_m) * 1000.0
     light = check("light_distance_m", light_distance_m)
-    problem = focus_problem(f, focus / 1000.0)
-    if problem:
-        raise InputError(problem)
-    if light * 1000.0 <= f:
-        raise InputError(f"the lights' distance ({light:g} m) must be longer than the focal length ({f:g} mm): "
-                         "a light nearer than that makes no image on the sensor")
+    if focus <= f:
+        raise InputError(
+            f"focus distance ({focus / 1000:g} m) must be longer than the focal length ({f:g} mm): "
+            "nothing can be focused closer"
+        )
     return f, focus, light * 1000.0
 
 
@@ -126,6 +125,9 @@ def fstop_from_coc(
     """
     c = check("coc_mm", coc, name="coc")
     f, focus, light = _check_geometry(focal_length_mm, focus_distance_m, light_distance_m)
+    if light <= f:  # a photo's lights are in front of the lens, beyond its focal length
+        raise InputError(f"the lights' distance ({light / 1000:g} m) must be longer than the focal length ({f:g} mm): "
+                         "a light nearer than that makes no image on the sensor")
     factor = _defocus_factor(f, focus, light, lens_model)
     if factor <= 0.0:
         raise InputError("the light is at the focus distance, where it makes no blur disc: the f-stop is undefined")

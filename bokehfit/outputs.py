@@ -511,7 +511,10 @@ def write_atomic(path: str | os.PathLike, write: Callable[[Path], None]) -> None
     with _sigterm_raises():
         temporary = _new_temporary(path)
         try:
-            write(temporary)
+            try:
+                write(temporary)
+            except OSError as error:  # a full disk, a quota: named by the output, not the temporary file
+                raise OSError(error.errno, error.strerror or str(error), str(path)) from None
             _pause_for_tests()
             check_replaceable(path)  # a file that appeared while we wrote
             os.replace(temporary, path)
@@ -576,8 +579,13 @@ def write_exr(path: str | os.PathLike, channels: dict[str, np.ndarray]) -> None:
     planes = {name: np.ascontiguousarray(plane, dtype=np.float32) for name, plane in channels.items()}
 
     def write(tmp: Path) -> None:
-        with OpenEXR.File(header, planes) as exr:
-            exr.write(str(tmp))
+        try:
+            with OpenEXR.File(header, planes) as exr:
+                exr.write(str(tmp))
+        except RuntimeError as error:  # OpenEXR reports a full disk and other I/O failures as RuntimeError
+            text = str(error)
+            code = errno.ENOSPC if "No space left" in text else errno.EIO
+            raise OSError(code, os.strerror(code) if code == errno.ENOSPC else text.split(". ")[0], str(tmp)) from None
 
     write_atomic(path, write)
 

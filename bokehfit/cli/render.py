@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import re
 import sys
+from pathlib import Path
 
 from bokehfit import __version__
 from bokehfit.apertures import SHAPES
@@ -29,7 +31,7 @@ from bokehfit.scene.renderer import QUICK_WORK, estimate_render_s
 from bokehfit.cli.aperture_args import add_feature_arguments
 from bokehfit.validate import arg_type, interval, shape_arg
 
-__all__ = ["add_parser", "run", "parse_size"]
+__all__ = ["add_parser", "run", "parse_size", "check_render_memory", "estimate_write_s", "RENDER_BYTES_PER_PIXEL"]
 
 #: Version of the --json layout; keys are added, never renamed, within one version.
 SCHEMA_VERSION = 1
@@ -37,6 +39,58 @@ SCHEMA_VERSION = 1
 DEFAULT_MAX_TIME_S = 3600.0
 #: Renders estimated to take longer than this print the estimate before they start, seconds.
 ANNOUNCE_S = 10.0
+#: Memory a render holds per pixel at its peak, bytes: the float32 RGB image (12), the 8-bit copy
+#: and the encoded file with its copies while it is written. Measured 28 B/px at 4096² for PNG and
+#: EXR (peak RSS less the interpreter's); 32 leaves a margin.
+RENDER_BYTES_PER_PIXEL = 32
+#: Memory the process holds besides the image (interpreter, libraries, GPU driver), bytes: measured 0.23 GB.
+RENDER_BASE_BYTES = 400 << 20
+#: Side of the trial image whose writing is timed to estimate the output's writing time, pixels.
+_WRITE_TRIAL_SIDE = 512
+
+
+def available_memory_bytes() -> int | None:
+    """Memory the system can give without swapping (Linux ``MemAvailable``), or None where unknown."""
+    try:
+        with open("/proc/meminfo", "rb") as file:
+            for line in file:
+                if line.startswith(b"MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def check_render_memory(width: int, height: int) -> int:
+    """The bytes a ``width``×``height`` render needs (:data:`RENDER_BYTES_PER_PIXEL`), or ``InputError`` past what is available."""
+    needed = width * height * RENDER_BYTES_PER_PIXEL + RENDER_BASE_BYTES
+    available = available_memory_bytes()
+    if available is not None and needed > available:
+        raise InputError(
+            f"a {width}×{height} render needs about {needed / 1e9:.3g} GB of memory ({RENDER_BYTES_PER_PIXEL} bytes a pixel), "
+            f"more than the {available / 1e9:.3g} GB available: lower --size"
+        )
+    return needed
+
+
+def estimate_write_s(width: int, height: int, suffix: str) -> float:
+    """Seconds to tone-map, encode and write the output, from a timed trial on a noisy image (the worst to compress)."""
+    import tempfile
+    import time
+
+    import numpy as np
+
+    side = _WRITE_TRIAL_SIDE
+    trial = np.random.default_rng(0).random((side, side, 3), dtype=np.float32)
+    with tempfile.TemporaryDirectory(prefix="bokehfit-write-trial-") as folder:
+        write_render(Path(folder) / f"warm{suffix}", trial[:16, :16])  # first imports and tables, not counted
+        start = time.perf_counter()
+        write_render(Path(folder) / f"trial{suffix}", trial)
+        elapsed = time.perf_counter() - start
+    return elapsed * width * height / (side * side)
 
 
 def parse_size(text: str) -> tuple[int, int]:
@@ -149,15 +203,18 @@ def run(args: argparse.Namespace) -> RenderResult:
         mask=args.mask,
     )
     settings = make_settings(width, height, args.spp, args.seed)
+    check_render_memory(width, height)
     if total_work(scene, lens, settings, args.adapter) > QUICK_WORK:
-        estimate, rate = estimate_render_s(scene, lens, settings, args.adapter)
+        rendering, rate = estimate_render_s(scene, lens, settings, args.adapter)
+        estimate = rendering + estimate_write_s(width, height, out.suffix.lower())
         if estimate > args.max_time:
             raise InputError(
-                f"the render would take about {_duration(estimate)} ({rate / 1e6:.3g} M samples/s in a trial), "
-                f"more than --max-time {args.max_time:g} s: lower --spp or --size, or raise --max-time"
+                f"the render would take about {_duration(estimate)} ({rate / 1e6:.3g} M samples/s in a trial, and writing "
+                f"the file), more than --max-time {args.max_time:g} s: lower --spp or --size, or raise --max-time"
             )
         if estimate > ANNOUNCE_S:
-            print(f"estimated time: about {_duration(estimate)} ({rate / 1e6:.3g} M samples/s in a trial)", flush=True)
+            print(f"estimated time: about {_duration(estimate)} ({rate / 1e6:.3g} M samples/s in a trial; "
+                  f"{_duration(estimate - rendering)} of it writing the file)", flush=True)
     progress = _Progress(total_work(scene, lens, settings, args.adapter))
     try:
         result = render_scene(scene, lens, settings, progress if progress.bar is not None else None, adapter=args.adapter)

@@ -16,7 +16,11 @@ Nothing here reads the environment to choose: the command line turns
 
 from __future__ import annotations
 
+import atexit
+import contextlib
 import os
+import shutil
+import stat
 import tempfile
 from dataclasses import dataclass
 from functools import lru_cache
@@ -107,13 +111,36 @@ def use_headless_egl() -> None:
     probe for a Wayland display and, where ``XDG_RUNTIME_DIR`` is unset (as on
     servers and CI), libwayland prints an error line for each probe; an empty
     private runtime folder makes the probe fail quietly instead.
+
+    A runtime folder is adopted only if it is private (:func:`_is_private_folder`: a
+    folder, not a link, owned by this user, closed to others, as the XDG Base Directory
+    specification requires). One that another user owns or can write to could hold a
+    planted Wayland socket that the GPU start would connect to and block on: it is
+    replaced, for this process, by a private one.
     """
     os.environ.setdefault("EGL_PLATFORM", "surfaceless")
-    if not os.environ.get("XDG_RUNTIME_DIR"):
-        # One private, empty folder per user, reused by every process (nothing is left behind).
-        folder = os.path.join(tempfile.gettempdir(), f"bokehfit-runtime-{os.getuid()}")
-        os.makedirs(folder, mode=0o700, exist_ok=True)
-        os.environ["XDG_RUNTIME_DIR"] = folder
+    if not hasattr(os, "getuid"):
+        return
+    given = os.environ.get("XDG_RUNTIME_DIR")
+    if given and _is_private_folder(given):
+        return
+    # One private, empty folder per user, reused by every process (nothing is left behind).
+    folder = os.path.join(tempfile.gettempdir(), f"bokehfit-runtime-{os.getuid()}")
+    with contextlib.suppress(OSError):
+        os.mkdir(folder, 0o700)
+    if not _is_private_folder(folder):  # someone else made it first: one of this process's own
+        folder = tempfile.mkdtemp(prefix="bokehfit-runtime-")
+        atexit.register(shutil.rmtree, folder, True)
+    os.environ["XDG_RUNTIME_DIR"] = folder
+
+
+def _is_private_folder(path: str) -> bool:
+    """Whether ``path`` is a folder (not a link) owned by this user that no other user may enter or write."""
+    try:
+        info = os.lstat(path)
+    except OSError:
+        return False
+    return stat.S_ISDIR(info.st_mode) and info.st_uid == os.getuid() and not info.st_mode & 0o077
 
 
 def _rank(info) -> int:

@@ -46,6 +46,7 @@ that: a 24-megapixel JPEG takes about 1.5 times a bare ``cv2.imread`` of it.
 from __future__ import annotations
 
 import contextlib
+import logging
 import math
 import mmap
 import os
@@ -282,7 +283,7 @@ def load_photo(path: str | os.PathLike, *, max_pixels: int = MAX_PIXELS, progres
         raise InputError(f"max_pixels must be a positive whole number (got {max_pixels!r})")
     _check_file(path)
     if path.suffix.lower() in RAW_SUFFIXES:
-        return _load_raw(path, int(max_pixels), progress)
+        return _quietly(path, _load_raw, path, int(max_pixels), progress)
     data = _read(path)
     head = data[:16]
     if head.startswith(b"\xff\xd8\xff"):
@@ -290,7 +291,7 @@ def load_photo(path: str | os.PathLike, *, max_pixels: int = MAX_PIXELS, progres
     if head.startswith(_PNG_SIGNATURE):
         return _load_png(path, data, int(max_pixels), progress)
     if head[:4] in (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+"):
-        return _load_tiff(path, data, int(max_pixels), progress)
+        return _quietly(path, _load_tiff, path, data, int(max_pixels), progress)
     for magic, name in _OTHER_FORMATS:
         if head.startswith(magic):
             raise InputError(f"{path.name} is a {name} file; bokehfit reads JPEG, PNG, TIFF and camera raw: convert it")
@@ -428,6 +429,52 @@ def _library_messages():
             sink.seek(0)
             text = sink.read(1 << 16).decode("utf-8", "replace")
             lines.extend(line.strip() for line in text.splitlines() if line.strip())
+
+
+class _LogLines(logging.Handler):
+    """A logging handler that keeps each record's message."""
+
+    def __init__(self, lines: list[str]):
+        super().__init__(logging.DEBUG)
+        self.lines = lines
+
+    def emit(self, record):
+        with contextlib.suppress(Exception):
+            self.lines.append(record.getMessage())
+
+
+#: Python loggers of the decoders bokehfit calls, whose records are kept off the terminal like C libraries' text.
+_DECODER_LOGGERS = ("tifffile", "rawpy", "imagecodecs")
+
+
+def _quietly(path: Path, load, *args) -> Photo:
+    """``load(*args)`` with what the decoders print (LibRaw on file descriptor 2, tifffile through logging) captured.
+
+    A damaged TIFF or raw file makes LibRaw and tifffile print lines of their own; they
+    become one note of the photo (``Photo.notes``), or, where the file is refused, the
+    ``InputError`` alone is shown, never the libraries' text.
+    """
+    logged: list[str] = []
+    handler = _LogLines(logged)
+    loggers = [logging.getLogger(name) for name in _DECODER_LOGGERS]
+    states = [(logger.propagate, logger.level) for logger in loggers]
+    for logger in loggers:
+        logger.addHandler(handler)
+        logger.propagate = False
+    try:
+        with _library_messages() as printed:
+            photo = load(*args)
+    finally:
+        for logger, (propagate, level) in zip(loggers, states):
+            logger.removeHandler(handler)
+            logger.propagate = propagate
+    messages = [" ".join(m.split()) for m in logged + printed if m.strip()]
+    if not messages:
+        return photo
+    said = messages[0] if len(messages[0]) <= _MESSAGE_MAX_CHARS else messages[0][: _MESSAGE_MAX_CHARS - 3] + "..."
+    more = f" (+{len(messages) - 1} more)" if len(messages) > 1 else ""
+    note = f"{path.name}: the decoder warned ({said}{more}); the image decoded in full"
+    return replace(photo, notes=(*photo.notes, note))
 
 
 def _imdecode(data: bytes, path: Path | None = None, shape: tuple[int, ...] | None = None):
@@ -1007,6 +1054,9 @@ def _load_tiff(path: Path, data: bytes, max_pixels: int, progress: bool) -> Phot
             return _load_raw(path, max_pixels, progress)
         width, height = int(page.imagewidth), int(page.imagelength)
         _check_size(path.name, width, height, max_pixels)
+        depth = int(getattr(page, "imagedepth", 1) or 1)
+        if depth != 1:
+            raise InputError(f"{path.name} is a volume TIFF (ImageDepth {depth}), not a photo; save one image as TIFF")
         photometric = int(page.photometric)
         if photometric in (3, 5, 8, 32803, 34892) or page.bitspersample == 1:
             kind = {3: "palette", 5: "CMYK", 8: "CIELab", 32803: "raw CFA", 34892: "linear raw"}.get(
@@ -1230,6 +1280,12 @@ def _load_raw(path: Path, max_pixels: int, progress: bool) -> Photo:
                 raise InputError(
                     f"{path.name} could not be developed as camera raw ({_short(error)}); convert it to DNG or TIFF"
                 ) from None
+            if rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.dtype != np.uint16 or min(rgb.shape[:2]) < MIN_SIDE_PX:
+                shape = "×".join(map(str, rgb.shape))
+                raise InputError(
+                    f"{path.name} could not be developed as camera raw (LibRaw gave a {shape} {rgb.dtype} image, not"
+                    " RGB: its colour filter (CFA) tags are damaged); convert it to DNG or TIFF with a raw converter"
+                )
             bar.step("develop")
             white = int(raw.white_level)
             clipped, clip_note = _raw_clipped(raw, rgb.shape[:2], white)

@@ -16,14 +16,31 @@ __all__ = ["RENDER_FORMATS", "tone_map_srgb8", "write_render"]
 RENDER_FORMATS = (".png", ".exr")
 
 
-def tone_map_srgb8(image: np.ndarray, exposure_ev: float = 0.0) -> np.ndarray:
-    """uint8 sRGB of a linear (H, W, 3) image: scaled by 2^exposure_ev, clipped to [0, 1], sRGB-encoded."""
+#: Rows tone-mapped at a time: the float temporaries stay a few MB whatever the image's size.
+_BLOCK_ROWS = 64
+
+
+def tone_map_srgb8(image: np.ndarray, exposure_ev: float = 0.0, *, bgr: bool = False) -> np.ndarray:
+    """uint8 sRGB of a linear (H, W, 3) image: scaled by 2^exposure_ev, clipped to [0, 1], sRGB-encoded.
+
+    Done in blocks of rows into the one uint8 result (3 bytes a pixel), so that a
+    16384² render needs no float64 copies of itself; ``bgr`` orders the channels as
+    OpenCV writes them.
+    """
     from bokehfit.io.colour import srgb_display_lut
 
     exposure_ev = check("exposure_ev", exposure_ev)
-    scaled = np.nan_to_num(np.asarray(image, dtype=np.float64) * 2.0**exposure_ev, nan=0.0, posinf=1.0, neginf=0.0)
-    index = np.rint(np.clip(scaled, 0.0, 1.0) * 65535.0).astype(np.int64)
-    return srgb_display_lut()[index]
+    image = np.asarray(image)
+    lut = srgb_display_lut()
+    scale = 2.0**exposure_ev
+    out = np.empty(image.shape, dtype=np.uint8)
+    for r0 in range(0, image.shape[0], _BLOCK_ROWS):
+        block = image[r0 : r0 + _BLOCK_ROWS]
+        if bgr:
+            block = block[..., ::-1]
+        scaled = np.nan_to_num(np.asarray(block, dtype=np.float64) * scale, nan=0.0, posinf=1.0, neginf=0.0)
+        out[r0 : r0 + _BLOCK_ROWS] = lut[np.rint(np.clip(scaled, 0.0, 1.0) * 65535.0).astype(np.int64)]
+    return out
 
 
 def write_render(path: Path, image: np.ndarray, exposure_ev: float = 0.0) -> None:
@@ -35,8 +52,7 @@ def write_render(path: Path, image: np.ndarray, exposure_ev: float = 0.0) -> Non
     exposure_ev = check("exposure_ev", exposure_ev)
     suffix = path.suffix.lower()
     if suffix == ".png":
-        rgb = tone_map_srgb8(image, exposure_ev)
-        write_png(path, np.ascontiguousarray(rgb[..., ::-1]))  # OpenCV writes BGR
+        write_png(path, tone_map_srgb8(image, exposure_ev, bgr=True))  # OpenCV writes BGR
     elif suffix == ".exr":
         write_exr(path, {name: image[..., i] for i, name in enumerate("RGB")})
     else:

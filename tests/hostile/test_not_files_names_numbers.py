@@ -502,3 +502,143 @@ def test_next_run_removes_stale_temporaries_even_when_it_writes_nothing(tmp_path
     finally:
         young.kill()
         young.wait()
+
+
+# --------------------------------------------------------------------------------------
+# From before: render limits, TIFF depth, CFA, full disk, runtime folder, library noise
+# --------------------------------------------------------------------------------------
+
+
+def test_render_tone_mapping_holds_no_float_copy_of_the_image():
+    """The 16384² render passed 12 GB: tone mapping made float64 copies of the whole image."""
+    import tracemalloc
+
+    from bokehfit.scene.images import tone_map_srgb8
+
+    image = np.random.default_rng(0).random((1024, 1024, 3), dtype=np.float32)
+    tracemalloc.start()
+    try:
+        out = tone_map_srgb8(image, bgr=True)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert out.dtype == np.uint8 and out.shape == image.shape
+    assert peak < 3 * image.shape[0] * image.shape[1] + (16 << 20), f"{peak / 1e6:.0f} MB"
+    expected = tone_map_srgb8(image[:64, :64])[..., ::-1]
+    assert np.array_equal(out[:64, :64], expected)
+
+
+def test_render_larger_than_the_memory_available_is_refused_with_its_need(monkeypatch):
+    from bokehfit.cli import render
+
+    monkeypatch.setattr(render, "available_memory_bytes", lambda: 2 << 30)
+    with pytest.raises(InputError, match="16384×16384 render needs about 9.01 GB of memory"):
+        render.check_render_memory(16384, 16384)
+    assert render.check_render_memory(512, 512) < 2 << 30
+
+
+def test_render_estimate_counts_writing_the_file():
+    from bokehfit.cli.render import estimate_write_s
+
+    small, large = estimate_write_s(512, 512, ".png"), estimate_write_s(16384, 16384, ".png")
+    assert large == pytest.approx(small * 1024, rel=0.5) and large > 1.0
+
+
+def _tiff_with_image_depth(path: Path, depth: int) -> Path:
+    import tifffile
+
+    tifffile.imwrite(path, _disc_rgb(64, 64), extratags=[(65000, "I", 1, (depth,), True)])
+    data = bytearray(path.read_bytes())
+    at = data.find(struct.pack("<HHI", 65000, 4, 1))
+    data[at : at + 2] = struct.pack("<H", 32997)  # ImageDepth, which tifffile will not write itself
+    path.write_bytes(bytes(data))
+    return path
+
+
+def test_tiff_with_image_depth_4_is_one_clear_line(tmp_path):
+    code, _, stderr = _run("discs", _tiff_with_image_depth(tmp_path / "depth.tif", 4))
+    assert code == 2
+    _one_error_line(stderr, "ImageDepth 4")
+
+
+@pytest.mark.parametrize("dim,pattern", [((2, 2), (3, 3, 3, 3)), ((16, 16), (5,) * 256), ((1, 1), (1,))])
+def test_dng_with_a_bad_cfa_pattern_is_one_clear_line(tmp_path, dim, pattern):
+    import tifffile
+    from photo_factory import bayer_mosaic
+
+    identity = (1, 1, 0, 1, 0, 1, 0, 1, 1, 1, 0, 1, 0, 1, 0, 1, 1, 1)
+    tags = [(33421, "H", 2, dim, True), (33422, "B", len(pattern), pattern, True), (50706, "B", 4, (1, 4, 0, 0), True),
+            (50707, "B", 4, (1, 1, 0, 0), True), (50708, "s", 0, "x", True), (50714, "H", 1, (64,), True),
+            (50717, "H", 1, (4095,), True), (50721, "2i", 9, identity, True), (50778, "H", 1, (21,), True),
+            (50728, "2I", 3, (1, 1, 1, 1, 1, 1), True)]
+    path = tmp_path / "bad.dng"
+    tifffile.imwrite(path, bayer_mosaic(64, 64, 64, 4000), photometric="cfa", subfiletype=0, extratags=tags, metadata=None)
+    code, _, stderr = _run("discs", path)
+    assert code == 2
+    _one_error_line(stderr, "raw")
+
+
+def test_damaged_raw_and_tiff_files_print_nothing_of_the_libraries(tmp_path):
+    import tifffile
+    from photo_factory import write_dng, bayer_mosaic
+
+    write_dng(tmp_path / "good.dng", bayer_mosaic(64, 64, 64, 4000), white=4095, black=64)
+    data = (tmp_path / "good.dng").read_bytes()
+    (tmp_path / "cut.dng").write_bytes(data[: len(data) // 2])
+    tifffile.imwrite(tmp_path / "good.tif", _disc_rgb(64, 64))
+    _tiff_with_image_depth(tmp_path / "strips.tif", 4)
+    for name in ("cut.dng", "strips.tif"):
+        code, _, stderr = _run("discs", tmp_path / name)
+        assert code == 2
+        _one_error_line(stderr)
+
+
+def test_full_disk_is_one_clear_line_naming_the_output(tmp_path, monkeypatch):
+    """Writers that fail for want of space (OpenEXR says so in a RuntimeError) give OSError naming the output."""
+    import errno
+
+    import OpenEXR
+
+    from bokehfit.outputs import write_exr
+
+    class Full:
+        def __init__(self, *args):
+            pass
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            return False
+
+        def write(self, name):
+            Path(name).write_bytes(b"part")
+            raise RuntimeError(f'Failed to write pixel data to image file "{name}". No space left on device.')
+
+    monkeypatch.setattr(OpenEXR, "File", Full)
+    with pytest.raises(OSError) as caught:
+        write_exr(tmp_path / "r.exr", {"Y": np.ones((4, 4), np.float32)})
+    assert caught.value.errno == errno.ENOSPC and caught.value.filename == str(tmp_path / "r.exr")
+    assert list(tmp_path.iterdir()) == [], "the temporary file is removed"
+
+
+@pytest.mark.skipif(not hasattr(os, "getuid"), reason="POSIX ownership")
+@pytest.mark.parametrize("planted", ["given", "per_user"])
+def test_a_runtime_folder_others_can_write_is_not_adopted(tmp_path, planted):
+    shared = tmp_path / "shared"
+    shared.mkdir()
+    os.chmod(shared, 0o777)
+    env = dict(os.environ, PYTHONPATH=str(Path(bokehfit.__file__).resolve().parents[1]))
+    if planted == "given":
+        env["XDG_RUNTIME_DIR"] = str(shared)
+    else:  # the per-user folder made first, open to all, by someone else
+        env.pop("XDG_RUNTIME_DIR", None)
+        env["TMPDIR"] = str(tmp_path)
+        (tmp_path / f"bokehfit-runtime-{os.getuid()}").mkdir(mode=0o777)
+        os.chmod(tmp_path / f"bokehfit-runtime-{os.getuid()}", 0o777)
+    code = ("import os, stat; from bokehfit.gpu.runtime import use_headless_egl; use_headless_egl(); "
+            "d = os.environ['XDG_RUNTIME_DIR']; s = os.lstat(d); "
+            "print(d, stat.S_ISDIR(s.st_mode) and s.st_uid == os.getuid() and not s.st_mode & 0o077)")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=HANG_S)
+    folder, private = done.stdout.split()
+    assert private == "True" and folder != str(shared) and "runtime" in folder, done.stdout + done.stderr
