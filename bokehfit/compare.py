@@ -224,8 +224,8 @@ class Comparison:
     def verdict_details(self) -> str:
         """The numbers behind :attr:`verdict`: the aperture with its uncertainties, the evidence, every doubt."""
         status = self.status
-        if status == "no_discs":
-            return ""
+        if status == "no_discs":  # the whole reason, where the first sentence had to cut it
+            return "" if self.verdict == f"No usable disc: {self.reason}." else f"{self.reason[:1].upper()}{self.reason[1:]}."
         if status == "no_fit":
             return f"{self.rejection}."
         fit = self.fit
