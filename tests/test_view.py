@@ -440,12 +440,41 @@ def test_view_mode_renders_progressively_without_controls(browser, server, artif
         page.wait_for_function(f"Number(document.getElementById('spp').textContent) > {first}", timeout=PAGE_TIMEOUT_MS)
         for selector in CONTROLS:
             assert not page.is_visible(selector), f"{selector} is visible in view mode"
-        assert page.evaluate("getComputedStyle(document.getElementById('mode-toggle')).opacity") == "0"
+        # the edit controls are hidden, but not their existence: the toggle shows, and a line says how
+        assert float(page.evaluate("getComputedStyle(document.getElementById('mode-toggle')).opacity")) >= 0.5
+        assert page.is_visible("#edit-hint") and "Edit" in page.text_content("#edit-hint")
         assert "circle, f/2.8, focus 0.7 m" in page.text_content("#settings")
         assert "sensor diagonal / 1500" in page.text_content("#dof-text")
         save_screenshot(page, artifacts, "viewer_view_mode.png")
         render_pixels(page)
         assert page.errors == []
+    finally:
+        page.close()
+
+
+def test_first_seconds_show_a_loading_message_not_a_black_canvas(browser, server):
+    page = browser.new_page()
+    shader_held = []
+
+    def hold_the_shader(route):  # the shader arrives late, as on a slow machine: the page waits on it
+        shader_held.append(True)
+        time.sleep(1.5)
+        route.continue_()
+
+    page.route("**/pathtrace.wgsl", hold_the_shader)
+    try:
+        page.goto(f"{server.url}?size={SMALL}")
+        page.wait_for_selector("#loading", state="visible", timeout=PAGE_TIMEOUT_MS)
+        assert "Starting the path tracer" in page.text_content("#loading")
+        assert not page.is_visible("#status"), "'0 spp' on a black canvas"
+        page.wait_for_function("document.body.dataset.ready === 'true'", timeout=PAGE_TIMEOUT_MS)
+        if page.evaluate("document.body.dataset.webgpu") != "ok":
+            _need("headless chromium has no usable WebGPU here")
+        wait_spp(page, 1)
+        page.wait_for_selector("#loading", state="hidden", timeout=PAGE_TIMEOUT_MS)
+        assert page.is_visible("#status") and spp(page) >= 1
+        assert shader_held
+        assert page.is_visible("#edit-hint") and page.is_visible("#mode-toggle")
     finally:
         page.close()
 

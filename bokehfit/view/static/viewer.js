@@ -720,6 +720,7 @@ class Viewer {
   }
 
   showSpp() {
+    if (this.spp > 0) document.body.dataset.firstFrame = "done"; // the loading message goes
     $("spp").textContent = String(this.spp);
     const rate = this.samplesPerSecond();
     $("rate").textContent = rate === null ? "" : `· ${rate.toFixed(rate < 10 ? 2 : 1)} spp/s`;
