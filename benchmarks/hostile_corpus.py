@@ -5,11 +5,13 @@ Usage::
     python benchmarks/hostile_corpus.py [--sweep] [--jobs N] [--only WORD,WORD] [--json out.json]
 
 Generates the corpus of ``tests/hostile/corpus.py`` in a temporary folder (damaged,
-crafted and absurd inputs; outputs over the user's files; SIGKILL during a write),
+crafted and absurd inputs; outputs over the user's files; SIGKILL during a write;
+files that are not files, link loops, damaged survey databases, fake Dask schedulers,
+names that are not UTF-8, absurd EXIF geometry, stale temporaries),
 runs each case in a subprocess bounded in time, and prints the count of cases per
-outcome (ok; hang; internal error; file lost or overwritten; leftovers; wrong exit
-code; noisy stderr), the same per group, and every case that is not ok with the
-reason. ``--sweep`` adds the slow cases the tests leave out (a 120,000-disc photo,
+outcome (ok; hang; internal error; absurd result, an f-stop no lens has; file lost or
+overwritten; leftovers; wrong exit code; noisy stderr), the same per group, and every
+case that is not ok with the reason. ``--sweep`` adds the slow cases the tests leave out (a 120,000-disc photo,
 an 8192-px Monte-Carlo kernel). The package tested is the one ``python -m
 bokehfit`` imports, so ``PYTHONPATH=OTHER_CHECKOUT`` measures another version.
 The script asserts nothing.

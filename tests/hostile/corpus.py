@@ -11,6 +11,7 @@ subprocess bounded in time, and sorts the outcome into one of ``OUTCOMES``:
   line on failure), the inputs and the user's files byte-identical, no stray file;
 - ``hang``: still running at the case's time limit (killed);
 - ``internal error``: exit code 3, or a traceback on stderr;
+- ``absurd result``: a JSON output reports an f-stop no lens has (outside f/0.5 to f/1000);
 - ``file lost or overwritten``: an input or a file of the user's changed or vanished;
 - ``leftovers``: a file bokehfit was not asked to write (a temporary file, an
   output beside the input) is left behind;
@@ -26,6 +27,7 @@ Paths in a case's ``argv`` are written ``@IN/name`` (the inputs folder) and
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import hashlib
 import io
@@ -41,7 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
-from photo_factory import icc_para_curve, make_icc_profile
+from photo_factory import bayer_mosaic, exif_for, icc_para_curve, make_icc_profile
 
 __all__ = [
     "OUTCOMES",
@@ -59,6 +61,7 @@ OUTCOMES = (
     "ok",
     "hang",
     "internal error",
+    "absurd result",
     "file lost or overwritten",
     "leftovers",
     "wrong exit code",
@@ -122,11 +125,15 @@ class Case:
     setup: tuple[tuple[str, ...], ...] = ()
     kill: bool = False
     sweep: bool = False
+    stale: tuple[str, ...] = ()
+
+    # ``stale``: temporary files of bokehfit's naming (``{pid}`` is a process that has ended) put in
+    # the case folder before the run; the run must remove them, even one that writes nothing.
 
     @property
     def writes_into_inputs(self) -> bool:
         """Whether an output option names a path in the inputs folder (such cases run one at a time)."""
-        flags = ("--json", "--overlay", "--out", "--out-dir", "--html")
+        flags = ("--json", "--overlay", "--out", "--out-dir", "--html", "--db")
         return any(a in flags and b.startswith("@IN") for a, b in zip(self.argv, self.argv[1:]))
 
 
@@ -302,7 +309,111 @@ def generate_inputs(folder: Path, sweep: bool = False) -> Path:
     # A folder with an image name; a file nobody may read.
     (folder / "folder.jpg").mkdir(exist_ok=True)
     os.chmod(folder / "unreadable.jpg", 0)
+    _round3_inputs(folder, rgb, good_jpeg, good_png, sweep)
     return folder
+
+
+def _replace_with(path: Path, make) -> None:
+    """Remove whatever is at ``path`` (a file, a link, a FIFO, a folder) and ``make(path)``."""
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path)
+    elif os.path.lexists(path):
+        path.unlink()
+    make(path)
+
+
+def _survey_database(path: Path, rows: int) -> None:
+    from bokehfit.survey.store import SurveyStore, row_from_record
+
+    with SurveyStore(path) as store:
+        rng = np.random.default_rng(0)
+        for i in range(rows):
+            record = {"sha256": f"{i:064x}", "path": f"p{i}.jpg", "status": "no_discs", "reason": "none",
+                      "thumbnail": rng.bytes(4000)}
+            store.put(row_from_record(record, size_bytes=1, json_path=None, html_path=None))
+
+
+def _round3_inputs(folder: Path, rgb: np.ndarray, good_jpeg: bytes, good_png: bytes, sweep: bool) -> None:
+    """Issue 25's inputs: files that are not files, crafted sizes, damaged databases, odd names, absurd EXIF."""
+    import sqlite3
+
+    import duckdb
+    import tifffile
+
+    fifo = hasattr(os, "mkfifo")
+    # Files that are not regular files (photos, outputs, lists, databases), and a library of them with link loops.
+    for name in ("fifo.jpg", "fifo_out.json", "fifo_out.npy", "fifo_list.txt", "fifo_db.duckdb"):
+        if fifo:
+            _replace_with(folder / name, os.mkfifo)
+    if os.path.exists("/dev/zero"):
+        _replace_with(folder / "zero.jpg", lambda p: os.symlink("/dev/zero", p))
+    library = folder / "library"
+    _replace_with(library, lambda p: (p / "sub").mkdir(parents=True))
+    if fifo:
+        os.mkfifo(library / "fifo.jpg")
+    if os.path.exists("/dev/zero"):
+        os.symlink("/dev/zero", library / "zero.jpg")
+    os.symlink("..", library / "sub" / "loop")  # two loops: glob's walk through them grows exponentially
+    os.symlink(".", library / "sub" / "loop2")
+    files: dict[str, bytes] = {}
+    # Many ICC profiles (each inflates to the 4 MiB cap); a small JPEG that claims 15811² px; a 16×100000 PNG.
+    iccp = _png_chunk(b"iCCP", b"icc\x00\x00" + zlib.compress(bytes(4 << 20), 9))
+    files["iccp_many.png"] = good_png[:33] + iccp * (10_000 if sweep else 2_500) + good_png[33:]
+    claim = bytearray(_jpeg_bytes((np.random.default_rng(0).random((256, 256, 3)) * 255).astype(np.uint8)))
+    at = 2
+    while claim[at + 1] not in (0xC0, 0xC1, 0xC2):
+        at += 2 + struct.unpack(">H", claim[at + 2 : at + 4])[0]
+    claim[at + 5 : at + 9] = struct.pack(">HH", 15811, 15811)
+    files["claim_15811.jpg"] = bytes(claim)
+    files["tall_16x100000.png"] = _png_bytes(np.zeros((100_000, 16), np.uint8))
+    # Absurd EXIF geometry on a photo with discs.
+    files["exif_10000mm_10.001m.jpg"] = _jpeg_bytes(rgb, subsampling=0, exif=exif_for(
+        make="Canon", model="Canon EOS 50D", fnumber=(28, 10), focal=(10000, 1), subject_distance=(10001, 1000)))
+    files["exif_1mm.jpg"] = _jpeg_bytes(rgb, subsampling=0, exif=exif_for(
+        make="Canon", model="Canon EOS 50D", fnumber=(28, 10), focal=(1, 1), subject_distance=(2, 1)))
+    files["exif_50mm.jpg"] = _jpeg_bytes(rgb, subsampling=0, exif=exif_for(
+        make="Canon", model="Canon EOS 50D", fnumber=(28, 10), focal=(50, 1), subject_distance=(2, 1)))
+    for name, data in files.items():
+        (folder / name).write_bytes(data)
+    if sys.platform != "darwin":
+        (folder / os.fsdecode(b"photo_\xff.jpg")).write_bytes(good_jpeg)
+    # A volume TIFF (ImageDepth 4, written under another tag number and renamed); DNGs damaged and with bad CFA tags.
+    tifffile.imwrite(folder / "depth4.tif", rgb[:64, :64], extratags=[(65000, "I", 1, (4,), True)])
+    data = bytearray((folder / "depth4.tif").read_bytes())
+    at = data.find(struct.pack("<HHI", 65000, 4, 1))
+    data[at : at + 2] = struct.pack("<H", 32997)
+    (folder / "depth4.tif").write_bytes(bytes(data))
+    identity = (1, 1, 0, 1, 0, 1, 0, 1, 1, 1, 0, 1, 0, 1, 0, 1, 1, 1)
+    mosaic = bayer_mosaic(64, 64, 64, 4000)
+    for name, dim, pattern in (("cfa_good.dng", (2, 2), (0, 1, 1, 2)), ("cfa_bad.dng", (2, 2), (3, 3, 3, 3)),
+                               ("cfa_16x16.dng", (16, 16), (5,) * 256)):
+        tags = [(33421, "H", 2, dim, True), (33422, "B", len(pattern), pattern, True), (50706, "B", 4, (1, 4, 0, 0), True),
+                (50707, "B", 4, (1, 1, 0, 0), True), (50708, "s", 0, "x", True), (50714, "H", 1, (64,), True),
+                (50717, "H", 1, (4095,), True), (50721, "2i", 9, identity, True), (50778, "H", 1, (21,), True),
+                (50728, "2I", 3, (1, 1, 1, 1, 1, 1), True)]
+        tifffile.imwrite(folder / name, mosaic, photometric="cfa", subfiletype=0, extratags=tags, metadata=None)
+    dng = (folder / "cfa_good.dng").read_bytes()
+    (folder / "cut.dng").write_bytes(dng[: len(dng) // 2])
+    # Survey databases: cut in half, without the photos table, with other columns, a damaged log, an SQLite file.
+    for name in ("whole.duckdb", "half.duckdb", "no_photos.duckdb", "other_columns.duckdb", "bad_wal.duckdb",
+                 "bad_wal.duckdb.wal", "sqlite.duckdb"):
+        (folder / name).unlink(missing_ok=True)
+    _survey_database(folder / "whole.duckdb", 200)
+    whole = (folder / "whole.duckdb").read_bytes()
+    (folder / "whole.duckdb").unlink()
+    (folder / "half.duckdb").write_bytes(whole[: len(whole) // 2])
+    for name, other in (("no_photos.duckdb", False), ("other_columns.duckdb", True)):
+        with duckdb.connect(str(folder / name)) as connection:
+            connection.execute("CREATE TABLE survey_meta (key VARCHAR, value VARCHAR)")
+            connection.execute("INSERT INTO survey_meta VALUES ('schema_version', '1')")
+            if other:
+                connection.execute("CREATE TABLE photos (sha256 VARCHAR, mine INTEGER)")
+    _survey_database(folder / "bad_wal.duckdb", 2)
+    (folder / "bad_wal.duckdb.wal").write_bytes(np.random.default_rng(1).bytes(300))
+    connection = sqlite3.connect(folder / "sqlite.duckdb")
+    connection.execute("CREATE TABLE photos (x)")
+    connection.commit()
+    connection.close()
 
 
 # --------------------------------------------------------------------------------------
@@ -581,9 +692,72 @@ def _cases_api() -> list[Case]:
     return [Case(name, "api", (), E2, FAST_S, api=code) for name, code in rows]
 
 
+def _cases_round3() -> list[Case]:
+    """Issue 25: files that are not files, crafted sizes, the survey's inputs, odd names, absurd EXIF, leftovers."""
+    jpg, kernel = "@IN/good.jpg", ("kernel", "--size", "16", "--diameter-px", "5")
+    survey_out = ("s.duckdb", "s.duckdb.wal", "s_reports/")
+    bad = os.fsdecode(b"\xff")
+    rows = [
+        # files that are not regular files, at every entry point
+        Case("kernel_out_is_a_fifo", "not a file", (*kernel, "--out", "@IN/fifo_out.npy"), E2),
+        Case("discs_json_is_a_fifo", "not a file", ("discs", jpg, "--json", "@IN/fifo_out.json"), E2, SLOW_S),
+        Case("compare_json_is_a_fifo", "not a file", ("compare", jpg, "--json", "@IN/fifo_out.json"), E2, SLOW_S),
+        Case("discs_photo_is_a_fifo", "not a file", ("discs", "@IN/fifo.jpg"), E2),
+        Case("compare_photo_is_dev_zero", "not a file", ("compare", "@IN/zero.jpg"), E2),
+        Case("survey_folder_of_fifos_and_link_loops", "not a file", ("survey", "@IN/library", "--db", "@OUT/s.duckdb"),
+             E0, SLOW_S, outputs=survey_out),
+        Case("survey_glob_through_link_loops", "not a file", ("survey", "@IN/library/**/*.jpg", "--db", "@OUT/s.duckdb"),
+             E0, SLOW_S, outputs=survey_out),
+        Case("survey_files_from_a_fifo", "not a file", ("survey", "--files-from", "@IN/fifo_list.txt", "--db",
+                                                         "@OUT/s.duckdb"), E2),
+        Case("survey_files_from_dev_zero", "not a file", ("survey", "--files-from", "/dev/zero", "--db", "@OUT/s.duckdb"), E2),
+        Case("survey_db_is_a_fifo", "not a file", ("survey", jpg, "--db", "@IN/fifo_db.duckdb"), E2),
+        # crafted sizes
+        Case("discs_png_2500_iccp_chunks", "huge", ("discs", "@IN/iccp_many.png"), E01, SLOW_S),
+        Case("discs_jpeg_claims_15811_squared", "huge", ("discs", "@IN/claim_15811.jpg"), E2, SLOW_S),
+        Case("compare_png_16x100000", "huge", ("compare", "@IN/tall_16x100000.png", "--json", "@OUT/c.json"), E01, SLOW_S,
+             outputs=("c.json", "c.html")),
+        Case("discs_tiff_image_depth_4", "damaged", ("discs", "@IN/depth4.tif"), E2),
+        Case("discs_dng_bad_cfa", "damaged", ("discs", "@IN/cfa_bad.dng"), E2),
+        Case("discs_dng_16x16_cfa", "damaged", ("discs", "@IN/cfa_16x16.dng"), E2),
+        Case("discs_dng_cut", "damaged", ("discs", "@IN/cut.dng"), E2),
+        # the survey's inputs
+        Case("survey_scheduler_silent", "survey", ("survey", jpg, "--db", "@OUT/s.duckdb", "--scheduler", "@SILENT"), E2, SLOW_S),
+        Case("survey_scheduler_garbage", "survey", ("survey", jpg, "--db", "@OUT/s.duckdb", "--scheduler", "@GARBAGE"), E2),
+        Case("survey_scheduler_tls", "survey", ("survey", jpg, "--db", "@OUT/s.duckdb", "--scheduler", "tls://@GARBAGE"), E2),
+        Case("survey_scheduler_ucx", "survey", ("survey", jpg, "--db", "@OUT/s.duckdb", "--scheduler", "ucx://127.0.0.1:1"), E2),
+        Case("survey_db_cut_in_half", "survey", ("survey", "--db", "@IN/half.duckdb", "--report", "@OUT/r.html"), E2),
+        Case("survey_db_without_photos", "survey", ("survey", jpg, "--db", "@IN/no_photos.duckdb"), E2),
+        Case("survey_db_other_columns", "survey", ("survey", "--db", "@IN/other_columns.duckdb", "--parquet", "@OUT/p.parquet"), E2),
+        Case("survey_db_damaged_wal", "survey", ("survey", jpg, "--db", "@IN/bad_wal.duckdb"), E2),
+        Case("survey_db_is_sqlite", "survey", ("survey", jpg, "--db", "@IN/sqlite.duckdb"), E2),
+        Case("survey_db_name_not_utf8", "names", ("survey", jpg, "--db", f"@OUT/s{bad}.duckdb"), E2),
+        # names that are not UTF-8
+        Case("compare_photo_name_not_utf8", "names", ("compare", os.fsdecode(b"@IN/photo_\xff.jpg"), "--json",
+                                                      f"@OUT/c{bad}.json"), E01, SLOW_S, outputs=(f"c{bad}.json", f"c{bad}.html")),
+        Case("kernel_out_name_not_utf8", "names", (*kernel, "--out", f"@OUT/k{bad}.npy"), E0, outputs=(f"k{bad}.npy",)),
+        # absurd geometry: no f-stop outside real lenses' range
+        Case("compare_exif_10000mm_focus_10.001m", "physical", ("compare", "@IN/exif_10000mm_10.001m.jpg", "--json",
+                                                                 "@OUT/c.json"), E01, SLOW_S, outputs=("c.json", "c.html")),
+        Case("compare_exif_focal_1mm", "physical", ("compare", "@IN/exif_1mm.jpg", "--json", "@OUT/c.json"), E01, SLOW_S,
+             outputs=("c.json", "c.html")),
+        Case("compare_light_distance_1e-300", "physical", ("compare", "@IN/exif_50mm.jpg", "--json", "@OUT/c.json",
+                                                           "--light-distance-m", "1e-300"), E012, SLOW_S, outputs=("c.json", "c.html")),
+        Case("compare_light_at_the_focus_plane", "physical", ("compare", "@IN/exif_50mm.jpg", "--json", "@OUT/c.json",
+                                                              "--light-distance-m", "2.000000001"), E012, SLOW_S,
+             outputs=("c.json", "c.html")),
+        # leftovers
+        Case("compare_refused_photo_makes_no_folder", "leftovers", ("compare", "@IN/not_image.jpg", "--json",
+                                                                    "@OUT/a/b/c/r.json"), E2),
+        Case("kernel_refused_removes_stale_temporary", "leftovers", (*kernel, "--out", "@OUT/k.npy", "--field-position", "0,0"),
+             E2, stale=(".k.npy.bokehfit-tmp-{pid}-0a1b2c3d.npy",)),
+    ]
+    return rows
+
+
 def build_cases(sweep: bool = False) -> list[Case]:
     """Every case of the corpus (with ``sweep``, the slow ones too), in a fixed order."""
-    cases = _cases_files() + _cases_numeric() + _cases_outputs() + _cases_api()
+    cases = _cases_files() + _cases_numeric() + _cases_outputs() + _cases_api() + _cases_round3()
     names = [case.name for case in cases]
     assert len(names) == len(set(names)), "case names must be unique"
     return [case for case in cases if sweep or not case.sweep]
@@ -606,21 +780,61 @@ except BokehfitError as error:
 
 def snapshot(folder: Path) -> dict[str, str | None]:
     """sha256 of every file under ``folder`` by relative path (folders: ``"<dir>"``; unreadable: None)."""
+    import stat
+
     state: dict[str, str | None] = {}
-    for path in sorted(Path(folder).rglob("*")):
-        key = path.relative_to(folder).as_posix()
-        if path.is_dir():
-            state[key] = "<dir>"
-            continue
-        try:
-            state[key] = hashlib.sha256(path.read_bytes()).hexdigest()
-        except OSError:
-            state[key] = None
-    return state
+    for top, folders, names in os.walk(folder):  # links to folders are not followed (the corpus has loops)
+        for name in folders + names:
+            path = Path(top) / name
+            key = path.relative_to(folder).as_posix()
+            info = os.lstat(path)
+            if stat.S_ISDIR(info.st_mode):
+                state[key] = "<dir>"
+            elif stat.S_ISLNK(info.st_mode):
+                state[key] = f"<link {os.readlink(path)}>"
+            elif not stat.S_ISREG(info.st_mode):
+                state[key] = f"<{stat.S_IFMT(info.st_mode):o}>"  # a FIFO: never opened
+            else:
+                try:
+                    state[key] = hashlib.sha256(path.read_bytes()).hexdigest()
+                except OSError:
+                    state[key] = None
+    return dict(sorted(state.items()))
 
 
 def _resolve(argv, inputs: Path, folder: Path) -> list[str]:
-    return [a.replace("@IN", str(inputs)).replace("@OUT", str(folder)) for a in argv]
+    out = [a.replace("@IN", str(inputs)).replace("@OUT", str(folder)) for a in argv]
+    if any("@SILENT" in a or "@GARBAGE" in a for a in out):
+        silent, garbage = _fake_schedulers()
+        out = [a.replace("@SILENT", f"tcp://127.0.0.1:{silent}").replace("tls://@GARBAGE", f"tls://127.0.0.1:{garbage}")
+               .replace("@GARBAGE", f"tcp://127.0.0.1:{garbage}") for a in out]
+    return out
+
+
+_SCHEDULERS: list[int] = []
+
+
+def _fake_schedulers() -> list[int]:
+    """Ports of two servers in this process, for ``--scheduler``: one accepts and never answers, one answers garbage."""
+    import socket
+    import threading
+
+    if _SCHEDULERS:
+        return _SCHEDULERS[:2]
+    silent = socket.create_server(("127.0.0.1", 0), backlog=64)  # the kernel accepts; nothing ever answers
+    garbage = socket.create_server(("127.0.0.1", 0), backlog=64)
+
+    def answer():
+        while True:
+            connection, _ = garbage.accept()
+            with contextlib.suppress(OSError):
+                connection.sendall(b"\xff" * 8 + b"not dask " * 100)
+            threading.Timer(5.0, connection.close).start()
+
+    threading.Thread(target=answer, daemon=True).start()
+    _SCHEDULERS.extend([silent.getsockname()[1], garbage.getsockname()[1]])
+    _SCHEDULERS.append(silent)  # kept open for the process's life
+    return _SCHEDULERS[:2]
 
 
 def _command(case: Case, inputs: Path, folder: Path, argv=None) -> list[str]:
@@ -708,6 +922,26 @@ def _stray_files(folder: Path, allowed: set[str]) -> list[str]:
     return sorted(strays)
 
 
+#: The f-stops of real lenses: the fastest made are about f/0.7, pinhole cameras reach f/500.
+FSTOP_RANGE = (0.5, 1000.0)
+
+
+def _absurd_fstops(folder: Path) -> str | None:
+    """The first JSON output under ``folder`` that reports an f-stop outside :data:`FSTOP_RANGE`, said in words."""
+    import json
+
+    for path in sorted(folder.rglob("*.json")):
+        try:
+            document = json.loads(path.read_text("utf-8"))
+        except (OSError, ValueError):
+            continue
+        aperture = document.get("aperture") if isinstance(document, dict) else None
+        value = aperture.get("fstop") if isinstance(aperture, dict) else None
+        if isinstance(value, (int, float)) and not FSTOP_RANGE[0] <= value <= FSTOP_RANGE[1]:
+            return f"{path.name} reports f/{value:g}"
+    return None
+
+
 def _stderr_problem(code: int, stderr: str) -> str | None:
     lines = [line for line in stderr.splitlines() if line.strip()]
     foreign = [line for line in lines if not line.startswith("bokehfit")]
@@ -738,6 +972,10 @@ def run_case(case: Case, inputs: Path, root: Path, reference: dict | None = None
             return Outcome(case.name, case.group, "wrong exit code", code, 0.0,
                            f"setup {' '.join(argv[:1])} exited {code}", stderr)
     own = {k: v for k, v in snapshot(folder).items() if k not in foreign_before}
+    if case.stale:
+        ended = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+        for name in case.stale:
+            (folder / name.format(pid=int(ended.stdout))).write_bytes(b"half a file")
     command = _command(case, inputs, folder)
     note = ""
     if case.kill:
@@ -752,6 +990,9 @@ def run_case(case: Case, inputs: Path, root: Path, reference: dict | None = None
     if code == 3 or "Traceback" in stderr:
         last = [line for line in stderr.splitlines() if line.strip()]
         return outcome("internal error", f"exit {code}: {last[-1][:160] if last else ''}")
+    absurd = _absurd_fstops(folder)
+    if absurd:
+        return outcome("absurd result", f"exit {code}; {absurd}")
     after_inputs = snapshot(inputs)
     changed = [k for k, v in reference.items() if after_inputs.get(k) != v]
     after = snapshot(folder)
