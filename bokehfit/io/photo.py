@@ -91,6 +91,7 @@ __all__ = [
     "DEFLATE_MAX_RATIO",
     "MIN_SIDE_PX",
     "MAX_PIXELS",
+    "MAX_FILE_BYTES",
     "PROGRESS_MIN_PIXELS",
     "RAW_SUFFIXES",
 ]
@@ -99,6 +100,9 @@ __all__ = [
 MIN_SIDE_PX = 16
 #: Largest accepted image, in pixels (width × height), unless ``max_pixels`` says otherwise.
 MAX_PIXELS = 250_000_000
+#: Largest photo file read, bytes: MAX_PIXELS of uncompressed RGBA float32 (16 bytes a pixel, the
+#: largest sample layout read) and 64 MiB of metadata. A larger file is no photo bokehfit could use.
+MAX_FILE_BYTES = MAX_PIXELS * 16 + (64 << 20)
 #: ``progress=True`` shows a bar only for images larger than this (pixels).
 PROGRESS_MIN_PIXELS = 8_000_000
 #: File suffixes read as camera raw through LibRaw (lower case, with the dot).
@@ -314,17 +318,28 @@ def _check_file(path: Path) -> None:
             raise InputError(f"{path} is a folder, not a photo; name a file in it")
         if not path.is_file():
             raise InputError(f"{path} is not a regular file; name a photo file")
-        if path.stat().st_size == 0:
+        size = path.stat().st_size
+        if size == 0:
             raise InputError(f"{path} is empty (0 bytes); check the file")
+        if size > MAX_FILE_BYTES:
+            raise InputError(f"{path} holds {size / 2**30:.3g} GiB, more than a photo of {MAX_PIXELS / 1e6:g} megapixels"
+                             f" can (at most {MAX_FILE_BYTES / 2**30:.3g} GiB); check the file")
     except OSError as error:
         raise InputError(f"cannot read {path}: {error.strerror or error}") from None
 
 
 def _read(path: Path) -> bytes:
+    """The file's bytes; only a regular file is opened (non-blocking, so a FIFO put there since the check can't stall)."""
+    from bokehfit.outputs import open_regular
+
     try:
-        return path.read_bytes()
+        with open_regular(path) as file:
+            data = file.read(MAX_FILE_BYTES + 1)
     except OSError as error:
         raise InputError(f"cannot read {path}: {error.strerror or error}") from None
+    if len(data) > MAX_FILE_BYTES:
+        raise InputError(f"{path} is larger than a photo can be ({MAX_FILE_BYTES / 2**30:.3g} GiB); check the file")
+    return data
 
 
 def _check_size(name: str, width: int, height: int, max_pixels: int) -> None:

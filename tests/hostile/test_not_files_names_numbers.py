@@ -250,6 +250,21 @@ def test_png_whose_header_claims_more_than_its_data_can_hold_is_refused(tmp_path
         load_photo(path)
 
 
+def test_photo_file_larger_than_any_photo_is_refused_unread(tmp_path):
+    """A sparse file of 5 GiB named .jpg: refused from its size, not read into memory."""
+    from bokehfit.io import load_photo
+    from bokehfit.io.photo import MAX_FILE_BYTES
+
+    path = tmp_path / "sparse.jpg"
+    with open(path, "wb") as file:
+        file.write(b"\xff\xd8\xff\xe0")
+        file.truncate(MAX_FILE_BYTES + 1)
+    start = time.process_time()
+    with pytest.raises(InputError, match="more than a photo"):
+        load_photo(path)
+    assert time.process_time() - start < LOAD_CPU_S
+
+
 def test_overlay_of_a_16_by_100000_photo_is_not_resized_to_nothing():
     from bokehfit.report import draw_disc_overlay
 
