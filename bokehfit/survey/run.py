@@ -308,8 +308,10 @@ def run_survey(
 ) -> SurveyRun:
     """Survey ``photos`` into ``store``; see :func:`bokehfit.survey.survey` for the parameters.
 
-    Ctrl-C stops handing out photos, keeps every result stored so far and returns
-    the run with ``interrupted`` set.
+    The first Ctrl-C (SIGINT, in the main thread) stops handing out photos, stores
+    the results already back, stops the local workers at once (the photos in
+    progress are done by the next run) and returns the run with ``interrupted``
+    set; a second Ctrl-C raises ``KeyboardInterrupt`` at once.
     """
     started = time.perf_counter()
     options = dict(options or {})
