@@ -66,8 +66,11 @@ class _Walk:
     def __init__(self, what: str):
         self.what, self.entries, self.seen = what, 0, set()
 
-    def folders(self, top: Path, follow_links: bool):
-        """(folder, sorted sub-folder names, sorted file names) from ``top`` down, hidden sub-folders left out."""
+    def folders(self, top: Path, follow_links: bool, enter=None):
+        """(folder, sorted sub-folder names, sorted file names) from ``top`` down, hidden sub-folders left out.
+
+        ``enter(folder)``, where given, says whether a sub-folder is walked at all.
+        """
         pending = [top]
         while pending:
             folder = pending.pop()
@@ -86,7 +89,7 @@ class _Walk:
             folders = sorted(e.name for e in entries if not e.name.startswith(".") and _is_folder(e, follow_links))
             files = sorted(e.name for e in entries if not _is_folder(e, follow_links))
             yield folder, folders, files
-            pending.extend(folder / name for name in reversed(folders))
+            pending.extend(folder / name for name in reversed(folders) if enter is None or enter(folder / name))
 
 
 def _is_folder(entry: os.DirEntry, follow_links: bool) -> bool:
@@ -111,13 +114,14 @@ def _glob(pattern: str) -> list[Path]:
     if not rest:
         return [root] if root.is_file() else []
     deep = "**" in rest
-    found = []
-    for folder, _, files in _Walk(f"PATH pattern {pattern!r}").folders(root, follow_links=True):
+
+    def enter(folder: Path) -> bool:  # only folders that files matching the pattern can be in
         relative = folder.parts[len(root.parts):]
-        if not deep and len(relative) >= len(rest):
-            continue
-        if not _prefix_matches(rest, relative):
-            continue
+        return (deep or len(relative) < len(rest)) and _prefix_matches(rest, relative)
+
+    found = []
+    for folder, _, files in _Walk(f"PATH pattern {pattern!r}").folders(root, follow_links=True, enter=enter):
+        relative = folder.parts[len(root.parts):]
         found.extend(folder / name for name in files if _matches(rest, (*relative, name)))
     return sorted(found)
 
