@@ -88,6 +88,22 @@ def reference_photo():
 
 
 @pytest.fixture(scope="session")
+def compared(reference_photo, gpu):
+    """``compared(name)`` -> ``compare_photo`` of a reference photo, run once per session (the
+    reference photos' tests share it: each compare of a real photo takes seconds)."""
+    from bokehfit.compare import compare_photo
+
+    done = {}
+
+    def get(name: str):
+        if name not in done:
+            done[name] = compare_photo(reference_photo(name))
+        return done[name]
+
+    return get
+
+
+@pytest.fixture(scope="session")
 def gpu():
     """The package's GPU context; skip (fail under CI=true) where there is none."""
     from bokehfit.cli import adapter_from_environment

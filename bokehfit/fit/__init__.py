@@ -48,10 +48,11 @@ from bokehfit.apertures import Aperture
 from bokehfit.discs import MIN_FIT_SEEN, USABLE_EVIDENCE, Disc
 from bokehfit.errors import InputError
 from bokehfit.fit.families import FAMILIES, Family, families_for
-from bokehfit.fit.pixels import FIT_BOUNDS, DiscCrop, PixelFit, crop_disc, fit_discs, render_disc_model
+from bokehfit.fit.pixels import FIT_BOUNDS, DiscCrop, PixelFit, crop_disc, field_position, fit_discs, render_disc_model
 from bokehfit.fit.result import FailedFit, FitFailedError, FitOptions, Parameter
 from bokehfit.fit.chromatic import ChromaticMeasure, measure_chromatic
-from bokehfit.fit.signature import Screen, outline_misfit, screen
+from bokehfit.fit.signature import Ellipse, Screen, fit_ellipse, outline_misfit, screen
+from bokehfit.metrics import angle_error
 
 __all__ = [
     "ApertureFit",
@@ -154,7 +155,8 @@ class ApertureFit:
     time_s: float = 0.0
     #: The aperture as the discs show it (``aperture`` turned back for near discs: 180°, −rim, ...).
     seen_aperture: Aperture | None = None
-    #: Discs fitted and then left out because the others' consensus does not share them: index → reason.
+    #: Discs set aside, index → reason: outlines no aperture shape explains, and discs fitted and then
+    #: left out because the others' consensus does not share them.
     rejected: dict = dataclasses.field(default_factory=dict)
     #: Each §3b feature tried on the joint fit → the BIC it gained (added when ≥ FEATURE_DELTA_BIC).
     feature_tests: dict = dataclasses.field(default_factory=dict)
@@ -303,6 +305,12 @@ MIN_RIM = 0.05
 #: and more. Regular discs are fitted before irregular ones, and a sure fit needs its discs'
 #: median misfit at most this (bokehfit.compare).
 REGULAR_OUTLINE_MISFIT = 0.08
+#: A disc whose outline only an ellipse explains (to REGULAR_OUTLINE_MISFIT) is fitted where a lens
+#: feature accounts for the stretch: at least MIN_ELONGATED_DISCS such discs stretched alike (angles
+#: within ELONGATED_ANGLE_SPREAD_DEG, aspects within ELONGATED_ASPECT_SPREAD: a squeeze, or a slit), or
+#: the cat-eye's: a disc at least VIGNETTING_MIN_FIELD from the centre whose long axis lies within
+#: CATEYE_AXIS_DEG of square to the line from the centre (the barrel cuts the side away from it).
+CATEYE_AXIS_DEG = 20.0
 #: The discs fitted are chosen from this many times the budget (max_discs) of the clearest ones.
 CHOICE_POOL = 4
 #: A shape with more parameters than the circle is kept only where it fits the outlines of at least
@@ -329,26 +337,77 @@ def _order_for_fit(discs: list[Disc], max_discs: int) -> list[Disc]:
     return usable[:max_discs]
 
 
-def _regular(screens: list[Screen]) -> bool:
-    """Whether some aperture shape that is not elongated fits the outline well (REGULAR_OUTLINE_MISFIT)."""
-    misfits = [s.rms for s in screens if "aspect" not in s.family.aperture.parameters] or [s.rms for s in screens]
-    return min(misfits) <= REGULAR_OUTLINE_MISFIT
+def _outline_class(screens: list[Screen], ellipse: Ellipse | None) -> tuple[int, float]:
+    """How an aperture explains the outline, and the best non-elongated shape's misfit: class 0
+    where a shape that is not elongated fits it to REGULAR_OUTLINE_MISFIT, 1 where only an elongated
+    one does (a slit at the disc's own aspect, or an ellipse: a squeeze, a cat-eye), 2 where none does."""
+    round_misfit = min((s.rms for s in screens if "aspect" not in s.family.aperture.parameters), default=math.inf)
+    if round_misfit <= REGULAR_OUTLINE_MISFIT:
+        return 0, round_misfit
+    stretched = min([s.rms for s in screens] + ([ellipse.misfit] if ellipse is not None else []))
+    return (1 if stretched <= REGULAR_OUTLINE_MISFIT else 2), round_misfit
 
 
-def _choose_discs(discs: list[Disc], families: tuple[Family, ...], max_discs: int, models: dict) -> list[Disc]:
-    """The discs fitted: from the CHOICE_POOL · ``max_discs`` clearest (:func:`_order_for_fit`),
-    those whose outline one of ``families`` explains (:func:`_regular`) first, each group in that
-    order. Among real photos' discs the clearest are often not discs at all (a lit leaf, a disc
-    cut by a blade, two merged glows): the outline says so. The straight families suffice (a
-    rounded polygon lies between its straight one and the circle) and keep the screen cheap.
-    ``models`` is the fit's memo of model signatures (:func:`~bokehfit.fit.signature.screen`)."""
+def _stretch_explained(disc: Disc, ellipse: Ellipse, others: list[Ellipse], shape: tuple[int, int]) -> bool:
+    """Whether a lens feature accounts for an elongated disc (CATEYE_AXIS_DEG's note): others
+    stretched alike, or the cat-eye's cut at its place in the frame."""
+    alike = sum(angle_error(ellipse.axis_deg, e.axis_deg, 180.0) <= ELONGATED_ANGLE_SPREAD_DEG
+                and abs(ellipse.aspect - e.aspect) <= ELONGATED_ASPECT_SPREAD for e in others)
+    if alike + 1 >= MIN_ELONGATED_DISCS:
+        return True
+    qx, qy = field_position(disc.center_xy, shape)
+    if math.hypot(qx, qy) < VIGNETTING_MIN_FIELD:
+        return False
+    radial = math.degrees(math.atan2(-qy, qx))  # the line from the centre, in the image (y down)
+    return angle_error(ellipse.axis_deg, radial + 90.0, 180.0) <= CATEYE_AXIS_DEG
+
+
+def _choose_discs(discs: list[Disc], families: tuple[Family, ...], max_discs: int, models: dict,
+                  shape: tuple[int, int]) -> tuple[list[Disc], dict[int, str]]:
+    """The discs fitted, and those set aside with the reason.
+
+    A defocused light is the aperture's image: every disc shows the same outline. So a disc is
+    fitted only where an aperture explains its outline (its own points) to REGULAR_OUTLINE_MISFIT
+    of its radius: some shape, or a shape stretched by what a lens does to every disc or to those
+    at the frame's edge (:func:`_stretch_explained`). Lit leaves and petals, in-focus highlights,
+    patches of sky between branches, discs cut by a blade and glows run together are not, and are
+    set aside with the reason, whatever their clarity. They are chosen from the CHOICE_POOL ·
+    ``max_discs`` clearest (:func:`_order_for_fit`): discs on their own before those beside other
+    light, shapes that are not elongated before elongated ones, each group in that order. The
+    straight families suffice (a rounded polygon lies between its straight one and the circle) and
+    keep the screen cheap. ``models`` is the fit's memo of model signatures
+    (:func:`~bokehfit.fit.signature.screen`); ``shape`` the photo's (rows, columns)."""
     pool = _order_for_fit(discs, CHOICE_POOL * max_discs)
-    groups: dict[tuple[bool, bool], list[Disc]] = {(False, True): [], (False, False): [], (True, True): [], (True, False): []}
+    groups: dict[tuple[bool, int], list[Disc]] = {(False, 0): [], (False, 1): [], (True, 0): [], (True, 1): []}
+    set_aside: dict[int, str] = {}
+    stretched: list[tuple[Disc, Ellipse]] = []
     for disc in pool:  # discs on their own come first: once max_discs of them are regular, the rest can wait
-        if len(groups[False, True]) >= max_discs:
+        if len(groups[False, 0]) >= max_discs:
             break
-        groups[disc.overlaps, _regular(screen(disc.outline_xy, families, _slit_aspect(disc), disc.outline_reliable, models))].append(disc)
-    return [disc for group in groups.values() for disc in group][:max_discs]
+        screens = screen(disc.outline_xy, families, _slit_aspect(disc), disc.outline_reliable, models)
+        kind, misfit = _outline_class(screens, None)
+        ellipse = None
+        if kind != 0:
+            ellipse = fit_ellipse(disc.outline_xy, disc.outline_reliable)
+            kind, _ = _outline_class(screens, ellipse)
+        if kind == 1 and ellipse is not None:
+            stretched.append((disc, ellipse))
+        elif kind == 1:
+            groups[disc.overlaps, 1].append(disc)
+        elif kind == 0:
+            groups[disc.overlaps, 0].append(disc)
+        else:
+            set_aside[disc.index] = (f"no aperture shape explains its outline (misfit {misfit:.2f} of its radius, "
+                                     f"at most {REGULAR_OUTLINE_MISFIT} for a disc)")
+    for disc, ellipse in stretched:
+        others = [e for d, e in stretched if d is not disc]
+        if _stretch_explained(disc, ellipse, others, shape):
+            groups[disc.overlaps, 1].append(disc)
+        else:
+            set_aside[disc.index] = (f"stretched (aspect {ellipse.aspect:.2f} at {ellipse.axis_deg:.0f}°) as no other "
+                                     "disc is and not as a cat-eye at its place: not the aperture's image")
+    order = {disc.index: i for i, disc in enumerate(pool)}
+    return [disc for group in groups.values() for disc in sorted(group, key=lambda d: order[d.index])][:max_discs], set_aside
 
 
 def _slit_aspect(disc: Disc) -> float:
@@ -665,16 +724,18 @@ def fit_aperture(
         raise InputError(f"clipped must have the luminance's shape {np.shape(luminance)} (got {np.shape(clipped)})")
     families = families_for(shapes)
     models: dict = {}  # the model signatures of the screens, made once for all discs
-    chosen = _choose_discs(discs, families, options.max_discs, models)
+    chosen, set_aside = _choose_discs(discs, families, options.max_discs, models, np.shape(luminance))
     if not chosen:
         flagged = {
             "cut by the frame": sum(d.clipped for d in discs),
             "under 8 px": sum(not d.resolvable for d in discs),
             "seen only in part": sum(d.outline_seen < MIN_FIT_SEEN for d in discs),
+            "with an outline no aperture shape explains": len(set_aside),
         }
         why = ", ".join(f"{n} {what}" for what, n in flagged.items() if n)
         found = f"{len(discs)} found: {why}" if discs else "none found"
-        return FailedFit("no_discs", f"no disc is clean enough to fit ({found})", time_s=time.perf_counter() - start)
+        return FailedFit("no_discs", f"no disc is clean enough to fit ({found})", time_s=time.perf_counter() - start,
+                         rejected=set_aside)
 
     crops = [crop_disc(luminance, d, clipped, discs) for d in chosen]
     # Every family is screened straight and, where it has blades, rounded (design.md §3b): a
@@ -889,7 +950,7 @@ def fit_aperture(
         options=options,
         time_s=time.perf_counter() - start,
         seen_aperture=seen_aperture,
-        rejected=rejected,
+        rejected={**set_aside, **rejected},
         feature_tests=feature_tests,
         feature_uncertainty=uncertainty,
         notes=tuple(notes),

@@ -129,7 +129,7 @@ class FailedFit:
         """No disc was fitted."""
         return None
 
-    rejected: dict = field(default_factory=dict)  #: no disc was set aside by a consensus
+    rejected: dict = field(default_factory=dict)  #: discs set aside (index → reason): outlines no aperture explains
 
     def to_json(self) -> dict:
         return {"status": self.status, "reason": self.reason, "candidates": []}

@@ -26,7 +26,7 @@ from bokehfit.apertures import Aperture, image_to_aperture
 from bokehfit.fit.families import Family
 from bokehfit.metrics import angle_error
 
-__all__ = ["SAMPLES", "Screen", "misalignment_deg", "outline_misfit", "radial_signature", "screen"]
+__all__ = ["SAMPLES", "Ellipse", "Screen", "fit_ellipse", "misalignment_deg", "outline_misfit", "radial_signature", "screen"]
 
 #: Angles of the radial signature (0.5° apart).
 SAMPLES = 720
@@ -69,6 +69,43 @@ def partial_signature(outline_xy: np.ndarray, reliable: np.ndarray) -> tuple[np.
     r = np.interp(_THETA, angles[order], radii[order], period=2 * np.pi)
     weights = np.interp(_THETA, angles[order], seen[order].astype(np.float64), period=2 * np.pi) > 0.5
     return r / max(float(np.median(radii[seen])), 1e-12), weights.astype(np.float64)
+
+
+@dataclass(frozen=True)
+class Ellipse:
+    """The ellipse that best fits an outline's own points, and how well."""
+
+    aspect: float  #: short axis over long, 0–1
+    axis_deg: float  #: the long axis's direction in the image, degrees from x (y down), in [0, 180)
+    misfit: float  #: RMS radial misfit of the points, in equal-area radii
+
+
+def fit_ellipse(outline_xy: np.ndarray, reliable: np.ndarray | None = None) -> Ellipse | None:
+    """The ellipse through an outline's own points (``reliable``; OpenCV's direct least squares,
+    Fitzgibbon et al. 1999), or None where fewer than 6 points are seen or none fits.
+
+    The misfit is the points' distance from the ellipse's centre against the ellipse's radius at
+    their angle, RMS, over the equal-area radius √(ab): the measure of :func:`screen`, for the
+    elongations an aperture shape's own outline does not hold (a squeezed circle, a cat-eye)."""
+    import cv2
+
+    points = np.asarray(outline_xy, dtype=np.float64)
+    if reliable is not None:
+        points = points[np.asarray(reliable, dtype=bool)]
+    if len(points) < 6:
+        return None
+    (cx, cy), (width, height), angle = cv2.fitEllipseDirect(points.astype(np.float32))
+    a, b = 0.5 * width, 0.5 * height  # along the ellipse's first axis (at ``angle``) and across it
+    if not (a > 0 and b > 0 and math.isfinite(a * b)):
+        return None
+    turn = math.radians(angle)
+    dx, dy = points[:, 0] - cx, points[:, 1] - cy
+    u, v = dx * math.cos(turn) + dy * math.sin(turn), -dx * math.sin(turn) + dy * math.cos(turn)
+    phi = np.arctan2(v, u)
+    model = a * b / np.sqrt((b * np.cos(phi)) ** 2 + (a * np.sin(phi)) ** 2)
+    misfit = float(np.sqrt(np.mean((np.hypot(u, v) - model) ** 2)) / math.sqrt(a * b))
+    axis = angle if a >= b else angle + 90.0
+    return Ellipse(min(a, b) / max(a, b), axis % 180.0, misfit)
 
 
 def radial_signature(outline_xy: np.ndarray) -> np.ndarray:
