@@ -55,6 +55,7 @@ __all__ = [
     "distance_text",
     "measurable",
     "plus_minus",
+    "table_candidates",
     "judge",
     "kernel_words",
     "resolve_geometry",
@@ -297,7 +298,7 @@ class Comparison:
             for name in LENS_FEATURES:
                 data[name] = data[f"{name}_uncertainty"] = None
             data.update(fstop, focus_side=None, sure=False, doubts=[], discs_fitted=0, candidates=[], runner_up=None,
-                        diameter_reason=None)
+                        runners_up=[], diameter_reason=None)
             return data
         data = fit.to_json()
         data.update(fstop, angle_note=_angle_note(fit), sure=not self.doubts, doubts=self.doubts)
@@ -306,7 +307,8 @@ class Comparison:
             data["diameter_reason"] = unmeasurable_reason(f"{data['diameter_px']:.2f} px", data["diameter_uncertainty_px"],
                                                           "the discs' sizes disagree (lights at many distances)")
             data["diameter_px"] = None
-        data["candidates"], data["runner_up"] = _ranked_candidates(fit, data["candidates"])
+        data["candidates"], data["runner_up"] = _with_roles(fit, data["candidates"])
+        data["runners_up"] = [c["name"] for c in table_candidates(data)[1:]]
         return data
 
     def disc_json(self, disc: Disc) -> dict:
@@ -372,7 +374,7 @@ class Comparison:
         if aperture["angle_note"]:
             lines.append(aperture["angle_note"])
         ranked = ", ".join(f"{c['display_name']} (ΔBIC {c['delta_bic']:.0f}{', the same answer' if c['role'] == 'same_answer' else ''})"
-                           for c in aperture["candidates"][1:])
+                           for c in table_candidates(aperture)[1:])
         lines.append(f"runners-up: {ranked or 'none'}")
         lines.append("metrics (discs vs kernel, median): " + ", ".join(
             f"{k} {v:.4f}" for k, v in data["metrics"].items() if v is not None))
@@ -503,21 +505,29 @@ def short_doubts(fit: ApertureFit, metrics: dict[str, float | None]) -> list[str
     return words
 
 
-def _ranked_candidates(fit: ApertureFit, candidates: list[dict]) -> tuple[list[dict], dict | None]:
-    """The candidates in table order, each with its ``role``: the chosen model, the runner-up (the best
-    model with another answer, the one the verdict names), then the rest by ΔBIC; and the runner-up."""
-    chosen, rest = dict(candidates[0]), [dict(c) for c in candidates[1:]]
-    chosen["role"] = "chosen"
+def _with_roles(fit: ApertureFit, candidates: list[dict]) -> tuple[list[dict], dict | None]:
+    """The candidates (the fit's order, best first), each with its ``role``: ``chosen``, ``runner_up``
+    (the best model with another answer: the one the verdict names), ``same_answer`` (the chosen
+    shape rounded, or round enough to be the circle) or ``other``; and the runner-up's entry."""
     runner_up = fit.runner_up
     name = None if runner_up is None else runner_up.family.name
-    first = [c for c in rest if c["name"] == name][:1]
-    others = sorted((c for c in rest if all(c is not f for f in first)), key=lambda c: c["delta_bic"])
-    for c in first:
-        c["role"] = "runner_up"
     same = {m.family.name for m in fit.candidates[1:] if fit.candidates[0].same_answer(m)}
-    for c in others:
-        c["role"] = "same_answer" if c["name"] in same else "other"
-    return [chosen, *first, *others], (first[0] if first else None)
+    entries = []
+    for i, c in enumerate(candidates):
+        role = "chosen" if i == 0 else "runner_up" if c["name"] == name else "same_answer" if c["name"] in same else "other"
+        entries.append({**c, "role": role})
+    return entries, next((c for c in entries if c["role"] == "runner_up"), None)
+
+
+def table_candidates(aperture: dict) -> list[dict]:
+    """The JSON's candidates as the runners-up tables list them: the chosen model, the runner-up the
+    verdict names, then the rest by ΔBIC (``aperture.runners_up`` names them in this order)."""
+    candidates = aperture["candidates"]
+    if not candidates:
+        return []
+    first = [c for c in candidates if c.get("role") == "runner_up"]
+    rest = sorted((c for c in candidates[1:] if c.get("role") != "runner_up"), key=lambda c: c["delta_bic"])
+    return [candidates[0], *first, *rest]
 
 
 def _clip(sentence: str) -> str:

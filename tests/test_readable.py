@@ -161,9 +161,10 @@ def test_one_runner_up_everywhere(circle):
     assert fit.candidates[0].same_answer(fit.candidates[1]), "the photo no longer shows the case"
     runner_up = fit.runner_up.family
     document = circle.to_json("")
-    candidates = document["aperture"]["candidates"]
-    assert candidates[1]["name"] == runner_up.name and candidates[1]["role"] == "runner_up"
-    assert document["aperture"]["runner_up"]["name"] == runner_up.name
+    aperture = document["aperture"]
+    assert aperture["runner_up"]["name"] == runner_up.name and aperture["runners_up"][0] == runner_up.name
+    roles = {c["name"]: c["role"] for c in aperture["candidates"]}  # the candidates stay best first
+    assert roles[runner_up.name] == "runner_up" and roles[fit.candidates[1].family.name] == "same_answer"
     assert f"over a {runner_up.aperture.display_name} (" in document["verdict_details"]
     ranked = next(line for line in circle.summary().splitlines() if line.startswith("runners-up:"))
     assert ranked.startswith(f"runners-up: {runner_up.aperture.display_name} (")

@@ -17,7 +17,8 @@ import math
 import cv2
 import numpy as np
 
-from bokehfit.compare import Comparison, diameter_text, distance_text, evidence_words, fstop_text, kernel_words, plus_minus
+from bokehfit.compare import (Comparison, diameter_text, distance_text, evidence_words, fstop_text, kernel_words, plus_minus,
+                              table_candidates)
 from bokehfit.fit.pixels import model_window
 from bokehfit.metrics import METRICS
 from bokehfit.report.overlay import ROLE_BGR, disc_role, draw_disc_overlay
@@ -300,7 +301,7 @@ def build_html(comparison: Comparison, command_line: str) -> str:
                      "rest. ΔBIC: how much worse each model explains the discs' pixels than the one that explains them "
                      "best; the words say how strongly the chosen model is preferred.</p>"
                      + _table(["model", "angle °", "ΔBIC", "evidence for the chosen", "outline misfit", "diameter px"],
-                              _candidate_rows(aperture["candidates"])))
+                              _candidate_rows(table_candidates(aperture))))
     if any(v is not None for v in data["metrics"].values()):
         metric_rows = [[name, _fmt(data["metrics"][name], 3), METRICS[name].better, METRICS[name].description] for name in METRICS]
         parts.append("<h2>Metrics: discs against the matched kernel (median)</h2>"
