@@ -75,3 +75,19 @@ def test_discs_whose_outline_a_shape_explains_are_fitted_before_clearer_junk():
     on_rounds = sum(min(math.dist(c, r) for r in rounds) < 2.0 for c in used)
     assert on_rounds >= 6, f"{on_rounds} of the {len(used)} discs used are the round discs: {fit.message}"
     assert fit.diameter_px == pytest.approx(ROUND_DIAMETER_PX, rel=0.08)
+
+
+def test_blobs_no_aperture_explains_are_set_aside_with_the_reason():
+    """A defocused light is the aperture's image: with a budget for every blob (16), the lit leaves
+    and the glows run together are still not fitted; each says why in the fit (no shape explains its
+    outline, or it is stretched as no other disc is and not as a cat-eye)."""
+    image, rounds = _photo()
+    search = find_discs(image)
+    fit = fit_aperture(image, search.discs, options=FitOptions(max_discs=16))
+    assert fit and fit.aperture.is_circle, fit.message
+    used = [item.disc for item in fit.disc_fits]
+    assert all(min(math.dist(d.center_xy, r) for r in rounds) < 2.0 for d in used), [d.center_xy for d in used]
+    junk = [d for d in search.discs if d.usable and min(math.dist(d.center_xy, r) for r in rounds) > 10.0]
+    assert junk, "the photo's leaves and glows are found as usable blobs"
+    reasons = [fit.rejected.get(d.index, "") for d in junk]
+    assert all("no aperture shape explains its outline" in r or "not the aperture's image" in r for r in reasons), reasons

@@ -91,3 +91,39 @@ def test_only_the_edge_discs_stretched_is_not_a_squeeze():
     polygons = [stretched(c, circle(20.0), 1.33 if c[0] != 200 else 1.0) for c in CENTRES]
     found = fit(photo(polygons))
     assert "squeeze" not in found.feature_tests, found.message
+
+
+def test_fit_ellipse_reads_aspect_and_axis():
+    from bokehfit.fit.signature import fit_ellipse
+
+    outline = stretched((100.0, 100.0), circle(20.0), 1.44, 30.0)  # y up: the long axis (y) turned by 30°
+    ellipse = fit_ellipse(outline)
+    assert ellipse.aspect == pytest.approx(1 / 1.44, abs=0.005)
+    # y up turned by 30° counter-clockwise is 120° from x with y up, 60° with y down.
+    assert angle_error(ellipse.axis_deg, 60.0, 180.0) < 0.5 and ellipse.misfit < 0.002
+    assert fit_ellipse(outline[:5]) is None
+
+
+def test_lemons_at_the_edge_are_a_cat_eye_a_lone_stretched_blob_is_not():
+    """Discs stretched square to the line from the frame's centre, at its edge, are the cat-eye's cut
+    and are fitted; one disc stretched along that line (no lens cuts a disc so) is set aside."""
+    width, height = WIDTH, HEIGHT
+    centre = np.array([(width - 1) / 2, (height - 1) / 2])
+    polygons, tangential = [], []
+    for x, y in CENTRES:
+        if x == 200:
+            polygons.append(stretched((x, y), circle(20.0), 1.0))
+            continue
+        radial = math.degrees(math.atan2(-(y - centre[1]), x - centre[0]))  # y up
+        along = radial + 90.0 if (x, y) != CENTRES[0] else radial  # the first one stretched along the radius
+        # ``stretched`` puts the long axis on y (up) for squeeze > 1: turn it onto ``along``.
+        polygons.append(stretched((x, y), circle(20.0), 1.3, along - 90.0))
+        tangential.append((x, y) != CENTRES[0])
+    image = photo(polygons)
+    found = fit(image)
+    assert found, found.reason
+    used = {tuple(np.round(item.disc.center_xy)) for item in found.disc_fits}
+    near = lambda point: any(math.dist(point, u) < 2.0 for u in used)  # noqa: E731
+    assert not near(CENTRES[0]), f"the disc stretched along the radius was used: {found.rejected}"
+    assert all(near(c) for c in CENTRES[1:]), (used, found.rejected)
+    assert any("cat-eye" in reason for reason in found.rejected.values()), found.rejected
