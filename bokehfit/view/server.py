@@ -111,6 +111,7 @@ from bokehfit.view.transport import Limits, Transport, log_line
 __all__ = [
     "COC_DIVISOR",
     "DepthOfField",
+    "JsonShape",
     "MaskStore",
     "ViewerServer",
     "depth_of_field",
@@ -170,9 +171,9 @@ MAX_HEAD_BYTES = MAX_REQUEST_LINE_BYTES + MAX_HEADER_BYTES + 1024
 MAX_JSON_DEPTH = 32
 #: Longest integer literal in a JSON body (digits; 2**64 has 20).
 MAX_JSON_INT_DIGITS = 32
-#: Longest run of number characters in a JSON body, refused before parsing (below
-#: Python's int-string conversion limit of 4300 digits, which would raise mid-parse).
-MAX_JSON_NUMBER_CHARS = 4000
+#: Numbers with an exponent of three digits read one by one for the float range;
+#: a body with more is refused (a compare result has none or a few).
+MAX_JSON_BIG_EXPONENTS = 1000
 #: Most values (and keys) in a JSON body. A compare result (written with indent=1)
 #: spends at least 14 bytes a value: at most 600,000 in MAX_BODY_BYTES. A million
 #: empty objects take 73 MB once parsed (2.9 MiB of text); MAX_BODY_BYTES of them
@@ -658,13 +659,14 @@ def _finite_number(name: str, value) -> float:
 
 #: Bytes the JSON scanner looks at in one step (its temporaries are a few times this).
 _SCAN_CHUNK = 1 << 18
-#: The class of each byte value, one bit a class, so that one table lookup sorts a step's bytes.
-_OPEN, _CLOSE, _SEPARATOR, _NUMBER, _QUOTE, _BACKSLASH = (1 << i for i in range(6))
-_BYTE_CLASS = np.zeros(256, dtype=np.uint8)
-for _chars, _class in ((b"[{", _OPEN), (b"]}", _CLOSE), (b",:", _SEPARATOR), (b"0123456789+-.eE", _NUMBER), (b'"', _QUOTE), (b"\\", _BACKSLASH)):
+#: The classes of each byte value, one bit a class, so that one table lookup sorts a step's bytes.
+_OPEN, _CLOSE, _SEPARATOR, _NUMBER, _QUOTE, _BACKSLASH, _DIGIT, _SIGN, _EXPONENT = (1 << i for i in range(9))
+_BYTE_CLASS = np.zeros(256, dtype=np.uint16)
+for _chars, _class in (
+    (b"[{", _OPEN), (b"]}", _CLOSE), (b",:", _SEPARATOR), (b'"', _QUOTE), (b"\\", _BACKSLASH),
+    (b".", _NUMBER), (b"0123456789", _NUMBER | _DIGIT), (b"+-", _NUMBER | _SIGN), (b"eE", _NUMBER | _EXPONENT),
+):
     _BYTE_CLASS[list(_chars)] = _class
-#: An exponent of three digits or more: the only way a number of a few characters leaves the float range.
-_BIG_EXPONENT = re.compile(rb"[eE][-+]?[0-9]{3}")
 
 
 @dataclass(frozen=True)
@@ -675,6 +677,9 @@ class JsonShape:
     values: int  #: an upper bound of the values and keys: separators and openings outside strings, plus one
     longest_number: int  #: characters of the longest run of number characters (0-9 + - . e E) outside strings
     longest_number_end: int  #: index just past that run
+    #: Where an exponent of three digits or more starts outside strings (the only way a short
+    #: number leaves the float range), the first MAX_JSON_BIG_EXPONENTS + 1 of them.
+    big_exponents: tuple[int, ...]
 
 
 def _run_ends(mask: np.ndarray, index: np.ndarray, carried: int) -> np.ndarray:
@@ -700,8 +705,12 @@ def json_shape(body: bytes | bytearray) -> JsonShape:
     number = 0  # the run of number characters that ends the step before
     inside = 0  # this step starts inside a string
     depth = deepest = values = longest = longest_end = 0
+    big_exponents: list[int] = []
     for start in range(0, len(data), _SCAN_CHUNK):
-        kind = _BYTE_CLASS[data[start : start + _SCAN_CHUNK]]
+        # The step and the 4 bytes after it: an exponent's digits may lie beyond the step.
+        ahead = _BYTE_CLASS[data[start : start + _SCAN_CHUNK + 4]]
+        kind = ahead[:_SCAN_CHUNK].copy()
+        ahead = np.concatenate((ahead[1:], np.zeros(5 - (len(ahead) - len(kind)), dtype=ahead.dtype)))
         index = np.arange(len(kind), dtype=np.int32)
         last_other = _run_ends((kind & _BACKSLASH).astype(bool), index, backslashes & 1)
         run_before = index - 1 - np.concatenate(([np.int32(-1 - (backslashes & 1))], last_other[:-1]))
@@ -718,10 +727,17 @@ def json_shape(body: bytes | bytearray) -> JsonShape:
         end = int(np.argmax(runs))
         if runs[end] > longest:
             longest, longest_end = int(runs[end]), start + end + 1
+        if len(big_exponents) <= MAX_JSON_BIG_EXPONENTS:
+            # ahead[i + k] is the class of byte i + 1 + k: e or E, then a sign or not, then three digits.
+            n = len(kind)
+            digits = [(ahead[k : k + n] & _DIGIT).astype(bool) for k in range(4)]
+            three = (digits[0] & digits[1] & digits[2]) | ((ahead[:n] & _SIGN).astype(bool) & digits[1] & digits[2] & digits[3])
+            found = np.flatnonzero((kind & _EXPONENT).astype(bool) & three)
+            big_exponents += (found[: MAX_JSON_BIG_EXPONENTS + 1 - len(big_exponents)] + start).tolist()
         inside = int(in_string[-1])
         backslashes = int(len(kind) - 1 - last_other[-1])
         number = int(runs[-1])
-    return JsonShape(deepest, values + 1, longest, longest_end)
+    return JsonShape(deepest, values + 1, longest, longest_end, tuple(big_exponents))
 
 
 def json_depth(body: bytes | bytearray) -> int:
@@ -729,25 +745,27 @@ def json_depth(body: bytes | bytearray) -> int:
     return json_shape(body).depth
 
 
-def _check_numbers(value, max_int_digits: int) -> None:
-    """Raise ``InputError`` at the first integer longer than ``max_int_digits`` or float beyond the float range in ``value``.
+def _check_exponents(body: bytes | bytearray, positions: tuple[int, ...]) -> None:
+    """Refuse a number whose exponent (at ``positions``, of three digits or more) leaves the float range (1e999).
 
-    A walk without recursion over the parsed value, for the bodies whose
-    numbers :func:`json_shape` could not clear.
+    Each such number is read with ``float``; more than ``MAX_JSON_BIG_EXPONENTS``
+    of them are refused unread. The numbers are short already (:func:`parse_json_body`).
     """
-    limit = 10**max_int_digits
-    pending = [value]
-    while pending:
-        item = pending.pop()
-        children = item.values() if isinstance(item, dict) else item
-        for child in children:
-            kind = type(child)
-            if kind is int and not -limit < child < limit:
-                raise InputError(f"the body is not JSON: an integer of {len(str(abs(child)))} digits (at most {max_int_digits})")
-            if kind is float and not math.isfinite(child):
-                raise InputError("the body is not JSON: a number is beyond the float range")
-            if kind is list or kind is dict:
-                pending.append(child)
+    if len(positions) > MAX_JSON_BIG_EXPONENTS:
+        raise InputError(f"the body is not JSON: more than {MAX_JSON_BIG_EXPONENTS} numbers with exponents of three digits")
+    for position in positions:
+        start = end = position
+        while start > 0 and _BYTE_CLASS[body[start - 1]] & _NUMBER:
+            start -= 1
+        while end < len(body) and _BYTE_CLASS[body[end]] & _NUMBER:
+            end += 1
+        token = bytes(body[start:end])
+        try:
+            finite = math.isfinite(float(token))
+        except ValueError:
+            continue  # not a number: parsing reports it
+        if not finite:
+            raise InputError(f"the body is not JSON: the number {token.decode('ascii')} is beyond the float range")
 
 
 def parse_json_body(
@@ -781,14 +799,17 @@ def parse_json_body(
 
     Notes
     -----
-    The body is scanned first (:func:`json_shape`: depth, values, the longest
-    number) and refused there if it can be; then parsed by the standard
-    library's C parser, numbers included (a Python hook per number would cost
-    more than 0.1 s per MiB of short numbers), with the cyclic garbage
+    Every check runs on the bytes, before parsing, in time linear in the
+    length: :func:`json_shape` gives the depth, the number of values and the
+    longest number, which may have at most ``max_int_digits`` digits and a
+    sign (a float's shortest repr has at most 24 characters); then the few
+    numbers with an exponent of three digits, the only short ones that can
+    leave the float range, are read one by one (at most
+    ``MAX_JSON_BIG_EXPONENTS``). The body is then parsed by the standard
+    library's C parser, numbers included (a Python hook per number would
+    cost more than 0.1 s per MiB of short numbers), with the cyclic garbage
     collector paused (it would walk every new list again and again, for
-    nothing: parsed JSON holds no cycles). Only where a number may be out
-    of bounds (one longer than ``max_int_digits`` characters, or an exponent
-    of three digits) are the parsed numbers checked, in one walk.
+    nothing: parsed JSON holds no cycles).
     """
 
     def no_constant(name: str):
@@ -799,11 +820,12 @@ def parse_json_body(
         raise InputError(f"the body nests {shape.depth} deep: at most {max_depth} is read")
     if shape.values > max_values:
         raise InputError(f"the body holds about {shape.values} values: at most {max_values} are read")
-    if shape.longest_number > MAX_JSON_NUMBER_CHARS:  # before Python's own int-string limit (4300 digits)
+    if shape.longest_number > max_int_digits + 1:
         token = bytes(body[shape.longest_number_end - shape.longest_number : shape.longest_number_end])
         if re.fullmatch(rb"-?[0-9]+", token):
             raise InputError(f"the body is not JSON: an integer of {len(token.lstrip(b'-'))} digits (at most {max_int_digits})")
-        raise InputError(f"the body is not JSON: a number of {len(token)} characters (at most {MAX_JSON_NUMBER_CHARS})")
+        raise InputError(f"the body is not JSON: a number of {len(token)} characters (at most {max_int_digits + 1})")
+    _check_exponents(body, shape.big_exponents)
     try:
         text = body.decode("utf-8")
     except UnicodeDecodeError as error:
@@ -819,11 +841,6 @@ def parse_json_body(
     finally:
         if collecting:
             gc.enable()
-    if shape.longest_number > max_int_digits or _BIG_EXPONENT.search(body):
-        if isinstance(value, (list, dict)):
-            _check_numbers(value, max_int_digits)
-        else:
-            _check_numbers([value], max_int_digits)
     return value
 
 
@@ -924,11 +941,10 @@ class _Refused(Exception):
 class _Site:
     """What every request of one server shares: its names, its token, its masks and its settings."""
 
-    def __init__(self, port: int, scene_name: str, size: tuple[int, int], verbose: bool, request_timeout_s: float):
+    def __init__(self, port: int, scene_name: str, size: tuple[int, int], verbose: bool):
         self.scene_name = scene_name
         self.size = size
         self.verbose = verbose
-        self.request_timeout_s = request_timeout_s
         self.masks = MaskStore()
         self.own_hosts = (f"127.0.0.1:{port}", f"localhost:{port}")
         self.own_origins = tuple(f"http://{host}" for host in self.own_hosts)
@@ -1202,7 +1218,7 @@ class ViewerServer:
         # Build the shader now: a broken install fails here, not in the browser.
         _pathtrace_source_cached(scene, False)
         self._listener = socket.create_server(("127.0.0.1", port), backlog=LISTEN_BACKLOG)
-        self.site = _Site(self.port, scene, tuple(size), verbose, float(request_timeout_s))
+        self._site = _Site(self.port, scene, tuple(size), verbose)
         limits = Limits(
             request_timeout_s=float(request_timeout_s),
             min_rate_bytes_per_s=MIN_TRANSFER_RATE,
@@ -1213,7 +1229,7 @@ class ViewerServer:
             linger_s=LINGER_S,
             linger_bytes=LINGER_BYTES,
         )
-        self._transport = Transport(self._listener, lambda: _Handler(self.site), limits, log_line)
+        self._transport = Transport(self._listener, lambda: _Handler(self._site), limits, log_line)
         self._thread: threading.Thread | None = None
 
     @property
@@ -1231,7 +1247,7 @@ class ViewerServer:
     @property
     def token(self) -> str:
         """This run's write token (the page receives it in its HTML)."""
-        return self.site.token
+        return self._site.token
 
     @property
     def max_connections(self) -> int:

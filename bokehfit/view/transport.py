@@ -68,16 +68,16 @@ _EVICTABLE = ("linger", "idle", "head", "queued")
 
 @dataclass(frozen=True)
 class Limits:
-    """The transport's deadlines and caps; see the module's docstring."""
+    """The transport's deadlines and caps; see the module's docstring (the viewer's values: bokehfit.view.server)."""
 
-    request_timeout_s: float = 5.0
-    min_rate_bytes_per_s: float = float(1 << 20)
-    max_head_bytes: int = 41 * 1024
-    max_connections: int = 1024
-    body_memory_bytes: int = 32 << 20
-    workers: int = 4
-    linger_s: float = 2.0
-    linger_bytes: int = 8 << 20
+    request_timeout_s: float
+    min_rate_bytes_per_s: float
+    max_head_bytes: int
+    max_connections: int
+    body_memory_bytes: int
+    workers: int
+    linger_s: float
+    linger_bytes: int
 
     def transfer_s(self, size: int) -> float:
         """Time allowed to move ``size`` bytes of body or answer (s)."""
