@@ -479,6 +479,40 @@ def test_first_seconds_show_a_loading_message_not_a_black_canvas(browser, server
         page.close()
 
 
+def _fill_of_the_bottom_left_disc(page) -> float:
+    """The bottom-left point light's disc (a light in front of the focus plane, a fifth of the image wide):
+    its bright pixels over its bounding box (a square 1, a circle π/4)."""
+    image = page.evaluate("window.bokehfitViewer.readImage()")
+    rgb = np.asarray(image["rgb"], dtype=np.float64).reshape(image["height"], image["width"], 3)
+    bright = rgb.mean(axis=2) > 0.5 * rgb.mean(axis=2).max()
+    assert 0.02 < bright.mean() < 0.6 and (rgb.mean(axis=2) < 0.02).mean() > 0.3, "lights on black"
+    corner = bright[image["height"] // 2:, : image["width"] // 3]
+    rows, cols = np.nonzero(corner)
+    return corner.sum() / ((np.ptp(rows) + 1) * (np.ptp(cols) + 1))
+
+
+def test_point_lights_are_one_click_away(browser, server, artifacts):
+    fills = {}
+    for shape in ("square", "circle"):
+        page = open_page(browser, server, f"shape={shape}&angle=0&max_spp=8")
+        try:
+            assert page.is_visible("#scene-toggle") and page.text_content("#scene-toggle") == "Point lights"
+            before = page.evaluate("window.bokehfitViewer.restarts")
+            page.click("#scene-toggle")  # in view mode: one click
+            page.wait_for_function(f"window.bokehfitViewer.restarts > {before}")
+            assert page.evaluate("window.bokehfitViewer.scene") == "points"
+            page.wait_for_function("window.bokehfitViewer.spp >= 8", timeout=PAGE_TIMEOUT_MS)
+            fills[shape] = _fill_of_the_bottom_left_disc(page)
+            if shape == "square":
+                save_screenshot(page, artifacts, "viewer_point_lights.png")
+            page.click("#scene-toggle")
+            assert page.evaluate("window.bokehfitViewer.scene") == "cornell"
+            assert page.errors == []
+        finally:
+            page.close()
+    assert fills["square"] > 0.9 and abs(fills["circle"] - math.pi / 4) < 0.08, fills
+
+
 def test_corner_toggle_reveals_the_controls(browser, server, artifacts):
     page = open_page(browser, server, "shape=hexagon&angle=15")
     try:

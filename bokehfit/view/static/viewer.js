@@ -19,7 +19,7 @@
 // first present, which would stop the render; one read-back a batch (1 MiB at 512×512) works
 // everywhere.
 //
-// URL options: ?size=WxH, max_spp=N (stop there; default 4096), mode=edit, and the
+// URL options: ?size=WxH, max_spp=N (stop there; default 4096), mode=edit, scene=points, and the
 // settings shape, angle, fstop, focus, blades, aspect, and the real-lens features roundness,
 // squeeze, rim, vignetting_radius with vignetting_shift, chromatic_red with chromatic_blue.
 
@@ -60,6 +60,80 @@ fn tonemap(@builtin(global_invocation_id) gid: vec3u) {
     let linear = clamp(a.rgb / max(a.a, 1.0) * exposure_scale, vec3f(0.0), vec3f(1.0));
     // pack4x8unorm puts x in the lowest byte: the bytes in memory are R, G, B, A as ImageData wants.
     rgba[i] = pack4x8unorm(vec4f(srgb_encode(linear), 1.0));
+}
+`;
+
+// Aperture samples per point light and batch, and the most workgroups of one point-light dispatch.
+const POINT_SAMPLES = 65536;
+const POINT_MAX_GROUPS = 4096;
+
+// The point-light view: six point lights on black, each drawn by splatting aperture samples
+// through it as `bokehfit render --scene points` does (points.wgsl), so that the aperture's
+// shape is what one sees: upright in the top row (lights behind the focus plane), turned by
+// 180° in the bottom row (in front of it). Appended to the served path tracer's WGSL, whose
+// aperture and camera functions it calls; counts in u32 atomics (WGSL has no float atomics),
+// then added to the accumulation buffer, which the tone map shows as it shows the path tracer's.
+const POINTS_WGSL = (binding, gain) => `
+@group(0) @binding(${binding}) var<storage, read_write> point_counts: array<atomic<u32>>;
+// Aperture samples per light and batch, the lights, the plateau after the exposure.
+const POINT_SAMPLES: u32 = ${POINT_SAMPLES}u;
+const POINT_LIGHTS: u32 = 6u;
+const POINT_GAIN: f32 = ${gain};
+
+// The near row's 1/depth offset from the focus plane: its discs a fifth of the image wide.
+fn point_offset() -> f32 {
+    let lens_diameter = 2.0 * params.aperture_scale / sqrt(PI);  // equal-area aperture, metres
+    return 0.4 * params.tan_half_x / lens_diameter;
+}
+
+// Light i: its pinhole slopes (x/z, y/z), 1/depth, and its disc's size over the near row's.
+// The far row is as far as the near one is near, or at infinity where that is nearer: its
+// discs are then smaller (a lens focused close blurs lights at infinity only so much).
+fn point_light(i: u32) -> vec4f {
+    let far = i < 3u;
+    let x = 0.55 * (f32(i % 3u) - 1.0) * params.tan_half_x;
+    let y = select(-0.45, 0.45, far) * params.tan_half_y;
+    let offset = select(point_offset(), min(point_offset(), 1.0 / params.focus_distance), far);
+    return vec4f(x, y, 1.0 / params.focus_distance + select(1.0, -1.0, far) * offset, offset / point_offset());
+}
+
+@compute @workgroup_size(64)
+fn point_splat(@builtin(global_invocation_id) gid: vec3u, @builtin(num_workgroups) groups: vec3u) {
+    for (var n = gid.x; n < POINT_SAMPLES * POINT_LIGHTS; n += groups.x * 64u) {
+        let light = point_light(n / POINT_SAMPLES);
+        // samples in proportion to the disc's area: every disc as bright
+        if (f32(n % POINT_SAMPLES) >= f32(POINT_SAMPLES) * light.w * light.w) {
+            continue;
+        }
+        let stream = (n / POINT_SAMPLES + 1u) ^ pcg_hash(params.seed);
+        let index = params.sample_index * POINT_SAMPLES + n % POINT_SAMPLES;
+        let u = vec2f(rand_unit_float(stream, index, 0u), rand_unit_float(stream, index, 1u));
+        let near = light.z > 1.0 / params.focus_distance;
+        let seen = aperture_seen(field_position(pinhole_image_xy(light.xy)), near);
+        let drawn = aperture_point(u, seen, CHANNEL_GREEN);
+        if (drawn.z > 0.0) {
+            // the lens ray from the aperture point through the light, on the focus plane, seen from the pinhole
+            let xy = pinhole_image_xy(drawn.xy * (1.0 / params.focus_distance - light.z) + light.xy);
+            if (xy.x >= 0.0 && xy.x < f32(params.image_width) && xy.y >= 0.0 && xy.y < f32(params.image_height)) {
+                atomicAdd(&point_counts[u32(xy.y) * params.image_width + u32(xy.x)], 1u);
+            }
+        }
+    }
+}
+
+@compute @workgroup_size(64)
+fn point_resolve(@builtin(global_invocation_id) gid: vec3u, @builtin(num_workgroups) groups: vec3u) {
+    // A near disc's area in pixels (the aperture's area, scaled by the offset into slopes, then
+    // pixels): counts × area / samples is 1 inside any disc.
+    let offset = point_offset();
+    let per_slope = vec2f(f32(params.image_width), f32(params.image_height)) / (2.0 * vec2f(params.tan_half_x, params.tan_half_y));
+    let area_px = params.aperture_scale * params.aperture_scale * offset * offset * per_slope.x * per_slope.y;
+    let scale = POINT_GAIN * area_px / f32(POINT_SAMPLES);
+    for (var i = gid.x; i < params.image_width * params.image_height; i += groups.x * 64u) {
+        let count = atomicLoad(&point_counts[i]);
+        atomicStore(&point_counts[i], 0u);
+        accum[i] += vec4f(vec3f(scale * f32(count)), 1.0);
+    }
 }
 `;
 
@@ -139,6 +213,27 @@ class Renderer {
       compute: { module, entryPoint: config.shader.entry_point },
     });
 
+    // The point-light view's pipelines: the same WGSL with its two entry points appended.
+    const b = config.shader.bindings;
+    const countsBinding = 1 + Math.max(...Object.values(b).map((e) => e.binding));
+    const gain = 0.9 / Math.pow(2, config.exposure_ev);
+    const pointsModule = device.createShaderModule({ label: "points", code: code + POINTS_WGSL(countsBinding, gain.toFixed(6)) });
+    await this.checkCompilation(pointsModule, "point lights");
+    const storage = (binding, type) => ({ binding, visibility: GPUShaderStage.COMPUTE, buffer: { type } });
+    this.pointsLayout = device.createBindGroupLayout({
+      label: "points",
+      entries: [storage(b.params.binding, "uniform"), storage(b.accum.binding, "storage"), storage(countsBinding, "storage")]
+        .concat(b.mask_table ? [storage(b.mask_table.binding, "read-only-storage")] : []),
+    });
+    this.countsBinding = countsBinding;
+    const pointsPipeline = (entryPoint) => device.createComputePipelineAsync({
+      label: entryPoint,
+      layout: device.createPipelineLayout({ bindGroupLayouts: [this.pointsLayout] }),
+      compute: { module: pointsModule, entryPoint },
+    });
+    [this.pointSplat, this.pointResolve] = await Promise.all([pointsPipeline("point_splat"), pointsPipeline("point_resolve")]);
+    this.scene = "cornell";
+
     const tonemapModule = device.createShaderModule({ label: "tonemap", code: TONEMAP_WGSL(this.layout.wgsl, config.shader.workgroup_size) });
     await this.checkCompilation(tonemapModule, "tonemap");
     this.tonemap = await device.createComputePipelineAsync({
@@ -157,6 +252,7 @@ class Renderer {
       size: bytes,
       usage: GPUBufferUsage.STORAGE | GPUBufferUsage.COPY_SRC | GPUBufferUsage.COPY_DST,
     });
+    this.counts = device.createBuffer({ label: "point_counts", size: 4 * width * height, usage: GPUBufferUsage.STORAGE });
     // The mask's CDF tables: a single 0 until a mask is uploaded (the binding must exist).
     this.setMaskTable(new Float32Array(1));
     this.rgba = device.createBuffer({ label: "rgba", size: 4 * width * height, usage: GPUBufferUsage.STORAGE | GPUBufferUsage.COPY_SRC });
@@ -186,6 +282,10 @@ class Renderer {
     ];
     if (b.mask_table) entries.push({ binding: b.mask_table.binding, resource: { buffer } });
     this.computeGroup = device.createBindGroup({ layout: this.compute.getBindGroupLayout(b.params.group), entries });
+    this.pointsGroup = device.createBindGroup({
+      layout: this.pointsLayout,
+      entries: [...entries, { binding: this.countsBinding, resource: { buffer: this.counts } }],
+    });
     if (this.maskTable) this.maskTable.destroy();
     this.maskTable = buffer;
   }
@@ -228,9 +328,17 @@ class Renderer {
       device.queue.writeBuffer(this.uniform, 0, this.recordBytes);
       const encoder = device.createCommandEncoder();
       const pass = encoder.beginComputePass();
-      pass.setPipeline(this.compute);
-      pass.setBindGroup(this.config.shader.bindings.params.group, this.computeGroup);
-      pass.dispatchWorkgroups(this.groups[0], this.groups[1]);
+      if (this.scene === "points") {
+        pass.setBindGroup(0, this.pointsGroup);
+        pass.setPipeline(this.pointSplat);
+        pass.dispatchWorkgroups(Math.min(POINT_MAX_GROUPS, Math.ceil((6 * POINT_SAMPLES) / 64)));
+        pass.setPipeline(this.pointResolve);
+        pass.dispatchWorkgroups(Math.min(POINT_MAX_GROUPS, Math.ceil((this.width * this.height) / 64)));
+      } else {
+        pass.setPipeline(this.compute);
+        pass.setBindGroup(this.config.shader.bindings.params.group, this.computeGroup);
+        pass.dispatchWorkgroups(this.groups[0], this.groups[1]);
+      }
       pass.end();
       device.queue.submit([encoder.finish()]);
     }
@@ -556,6 +664,7 @@ class Viewer {
     this.request = 0;
     this.wake = null;
     this.sketch = new TopDown($("topdown"), config);
+    this.scene = query.get("scene") === "points" ? "points" : "cornell";
   }
 
   initialState() {
@@ -585,10 +694,12 @@ class Viewer {
   async start() {
     this.setupControls();
     this.setMode(query.get("mode") === "edit" ? "edit" : "view");
+    this.setScene(this.scene);
     $("fallback-command").textContent = this.config.fallback_command;
     try {
       this.renderer = await Renderer.create($("render"), this.config, this.width, this.height);
       $("adapter").textContent = `· ${this.renderer.adapterName}`;
+      this.renderer.scene = this.scene;
       document.body.dataset.webgpu = "ok";
     } catch (error) {
       this.renderer = null;
@@ -734,6 +845,19 @@ class Viewer {
 
   // --- controls
 
+  // The Cornell box (path traced) or the point lights (the aperture's shape itself), one click apart.
+  setScene(scene) {
+    this.scene = scene;
+    if (this.renderer) this.renderer.scene = scene;
+    document.body.dataset.scene = scene;
+    const t = $("scene-toggle");
+    t.textContent = scene === "points" ? "Cornell box" : "Point lights";
+    t.setAttribute("aria-pressed", String(scene === "points"));
+    // the PNG's settings and render command are the Cornell box's
+    $("save-png").disabled = scene === "points";
+    if (this.info) this.restart();
+  }
+
   setMode(mode) {
     document.body.dataset.mode = mode;
     const t = $("mode-toggle");
@@ -778,6 +902,7 @@ class Viewer {
     });
 
     $("mode-toggle").addEventListener("click", () => this.setMode(document.body.dataset.mode === "edit" ? "view" : "edit"));
+    $("scene-toggle").addEventListener("click", () => this.setScene(this.scene === "points" ? "cornell" : "points"));
     document.addEventListener("keydown", (event) => {
       const typing = event.target instanceof HTMLInputElement || event.target instanceof HTMLSelectElement;
       if (!typing && !event.ctrlKey && !event.metaKey && !event.altKey && event.key.toLowerCase() === "e") {
@@ -1002,6 +1127,7 @@ async function main() {
     get spp() { return viewer.spp; },
     get restarts() { return viewer.restarts; },
     get state() { return { ...viewer.state }; },
+    get scene() { return viewer.scene; },
     get info() { return viewer.info; },
     samplesPerSecond: () => viewer.samplesPerSecond(),
     readImage: async () => {
