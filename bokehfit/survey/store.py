@@ -234,6 +234,17 @@ class SurveyStore:
     InputError
         Naming ``--db`` when the file is not a DuckDB database, is another
         program's database, is in use by another survey, or can't be created.
+
+    Notes
+    -----
+    Before DuckDB sees the file: its name must be UTF-8, it and its log must be
+    regular files (``stat``), and its header DuckDB's (an SQLite file is named as
+    one). DuckDB then loads and installs no extension (:data:`CONNECTION_CONFIG`).
+    An existing database must hold the ``photos`` table with exactly
+    :data:`COLUMNS`, every block of which is read once (a file cut short fails
+    here, not halfway through a survey), and a write-ahead log left beside it
+    must fold in at a checkpoint: DuckDB skips one it can't replay without a
+    word, and its rows would be lost unseen.
     """
 
     def __init__(self, path: str | os.PathLike, *, read_only: bool = False):
