@@ -183,10 +183,6 @@ class Transport:
             except RuntimeError:  # the loop has closed already
                 pass
 
-    @property
-    def open_connections(self) -> int:
-        return len(self._connections)
-
     async def _main(self) -> None:
         self._loop = asyncio.get_running_loop()
         self._stopping = asyncio.Event()
