@@ -547,6 +547,37 @@ def view_process(tmp_path_factory):
         yield running
 
 
+def current_rss_mb(pid: int) -> float:
+    return int(re.search(r"VmRSS:\s+(\d+) kB", Path(f"/proc/{pid}/status").read_text()).group(1)) / 1024
+
+
+#: Clients that ask for the largest answer (a 1024² mask's tables, 4 MB) and never read it.
+NON_READERS = 100
+
+
+def test_clients_that_never_read_a_large_answer_share_one_copy_of_it(tmp_path):
+    with bokehfit_view(tmp_path) as (process, port), ExitStack() as stack:
+        mask = png_bytes(np.random.default_rng(1).random((1024, 1024)))
+        upload = exchange(port, request(port, "POST", "/mask", body=mask))
+        assert upload.status == 200, upload.body[:300]
+        table_url = json.loads(upload.body)["table_url"]
+        assert len(exchange(port, request(port, "GET", table_url)).body) > 4_000_000
+        before = current_rss_mb(process.pid)
+        socks = []
+        for _ in range(NON_READERS):
+            sock = stack.enter_context(socket.socket())
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)  # read nothing, hold little
+            sock.settimeout(ANSWER_TIMEOUT_S)
+            sock.connect(("127.0.0.1", port))
+            sock.sendall(request(port, "GET", table_url))
+            socks.append(sock)
+        time.sleep(2.0)  # every answer made and stuck in its socket (the answer deadline is 9 s)
+        grown = current_rss_mb(process.pid) - before
+        # A copy per answer would be 400 MB; one shared copy and the sockets' bookkeeping are a few.
+        assert grown < 100, f"{NON_READERS} unread 4 MB answers took {grown:.0f} MB"
+        assert exchange(port, request(port, "GET", "/style.css")).status == 200
+
+
 def cpu_s(pid: int) -> float:
     fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")

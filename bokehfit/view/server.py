@@ -413,6 +413,7 @@ class MaskStore:
     def __init__(self, capacity: int = MAX_MASKS):
         self.capacity = capacity
         self._tables: dict[str, MaskTable] = {}
+        self._bytes: dict[str, bytes] = {}
         self._lock = threading.Lock()
 
     def add(self, table: MaskTable) -> str:
@@ -421,8 +422,20 @@ class MaskStore:
             self._tables.pop(table.digest, None)
             self._tables[table.digest] = table
             while len(self._tables) > self.capacity:
-                del self._tables[next(iter(self._tables))]
+                self._bytes.pop(self._tables.pop(next(iter(self._tables))).digest, None)
         return table.digest
+
+    def gpu_bytes(self, digest) -> bytes:
+        """``GET /mask_table``: the table of ``digest`` as little-endian float32, made once and shared by every answer."""
+        table = self.get(digest)
+        with self._lock:
+            data = self._bytes.get(table.digest)
+        if data is None:
+            data = table.gpu_table().astype("<f4").tobytes()
+            with self._lock:
+                if table.digest in self._tables:
+                    self._bytes[table.digest] = data
+        return data
 
     def get(self, digest) -> MaskTable:
         """The table of ``digest``; ``InputError`` where none was uploaded (or it was dropped)."""
@@ -951,6 +964,17 @@ class _Refused(Exception):
         self.headers = headers
 
 
+@lru_cache(maxsize=None)
+def _static_file(name: str) -> bytes:
+    """A file of the page (package data), read once: every answer shares the one copy."""
+    return resources.files("bokehfit.view").joinpath("static", name).read_bytes()
+
+
+@lru_cache(maxsize=8)
+def _pathtrace_bytes(scene_name: str) -> bytes:
+    return _pathtrace_source_cached(scene_name, False).encode("utf-8")
+
+
 class _Site:
     """What every request of one server shares: its names, its token, its masks and its settings."""
 
@@ -963,6 +987,7 @@ class _Site:
         self.own_origins = tuple(f"http://{host}" for host in self.own_hosts)
         #: The per-run secret the page sends back with every write (in the page it is served).
         self.token = secrets.token_urlsafe(32)
+        self.page = _static_file("index.html").replace(TOKEN_PLACEHOLDER, self.token.encode("ascii"))
 
 
 class _Handler(BaseHTTPRequestHandler):
@@ -984,6 +1009,7 @@ class _Handler(BaseHTTPRequestHandler):
         self.close_connection = True  # one request per connection
         self._answered = False
         self._route = None
+        self._body = b""  # the answer's body, sent after wfile's head (shared, never copied)
 
     def log_message(self, format, *args):  # quiet unless --verbose: keep the terminal clean
         if self.server.verbose:
@@ -1003,7 +1029,7 @@ class _Handler(BaseHTTPRequestHandler):
         self.send_header("Connection", "close")
         self.end_headers()
         if self.command != "HEAD":
-            self.wfile.write(body)
+            self._body = body
 
     def _json(self, status: int, data, headers: tuple[tuple[str, str], ...] = ()) -> None:
         body = json.dumps(data, allow_nan=False).encode("utf-8")
@@ -1071,8 +1097,8 @@ class _Handler(BaseHTTPRequestHandler):
     def refuse(self, status: int, message: str) -> None:
         self._answer_late(HTTPStatus(status), message)
 
-    def output(self) -> bytes:
-        return self.wfile.getvalue()
+    def output(self) -> tuple[bytes, ...]:
+        return self.wfile.getvalue(), self._body
 
     # --- the one gate -----------------------------------------------------------------------
 
@@ -1162,20 +1188,17 @@ class _Handler(BaseHTTPRequestHandler):
         try:
             if url.path in _STATIC:
                 name, content_type = _STATIC[url.path]
-                page = resources.files("bokehfit.view").joinpath("static", name).read_bytes()
-                if name == "index.html":
-                    page = page.replace(TOKEN_PLACEHOLDER, self.server.token.encode("ascii"))
+                page = self.server.page if name == "index.html" else _static_file(name)
                 return self._send(HTTPStatus.OK, page, content_type)
             if url.path == "/pathtrace.wgsl":
-                source = _pathtrace_source_cached(self.server.scene_name, False).encode("utf-8")
-                return self._send(HTTPStatus.OK, source, "text/wgsl; charset=utf-8")
+                return self._send(HTTPStatus.OK, _pathtrace_bytes(self.server.scene_name), "text/wgsl; charset=utf-8")
             if url.path == "/config.json":
                 return self._json(HTTPStatus.OK, viewer_config(self.server.scene_name, self.server.size))
             if url.path == "/params.json":
                 return self._json(HTTPStatus.OK, params_for_query(parse_qs(url.query), self.server.scene_name, self.server.masks))
             if url.path == "/mask_table":
-                table = self.server.masks.get((parse_qs(url.query).get("mask") or [None])[-1])
-                return self._send(HTTPStatus.OK, table.gpu_table().astype("<f4").tobytes(), "application/octet-stream")
+                table = self.server.masks.gpu_bytes((parse_qs(url.query).get("mask") or [None])[-1])
+                return self._send(HTTPStatus.OK, table, "application/octet-stream")
             if url.path == "/favicon.ico":
                 return self._send(HTTPStatus.NO_CONTENT, b"", "image/x-icon")
         except InputError as error:

@@ -100,8 +100,11 @@ class Exchange(Protocol):
     def refuse(self, status: int, message: str) -> None:
         """Answer with ``status`` and ``message`` (a deadline passed, the body ended early, no room)."""
 
-    def output(self) -> bytes:
-        """The answer's bytes, status line first (empty where nothing is to be sent)."""
+    def output(self) -> tuple[bytes, ...]:
+        """The answer's parts, status line first (none or empty ones where nothing is to be sent).
+
+        Sent as they are, never joined: a large body shared by many answers stays one copy.
+        """
 
 
 class _ByteBudget:
@@ -351,15 +354,23 @@ class Transport:
         pool = self._body_pool if body else self._pool
         await asyncio.get_running_loop().run_in_executor(pool, exchange.respond, body)
 
+    @staticmethod
+    async def _send_all(sock: socket.socket, parts: list[bytes]) -> None:
+        loop = asyncio.get_running_loop()
+        for part in parts:
+            await loop.sock_sendall(sock, part)
+
     async def _answer(self, connection: _Connection, exchange: Exchange) -> None:
         """Send the answer within its deadline, then linger and close."""
         loop = asyncio.get_running_loop()
         sock, limits = connection.sock, self.limits
-        answer = exchange.output()
-        if answer:
+        parts = [part for part in exchange.output() if part]
+        if sum(map(len, parts)) <= 1 << 16:
+            parts = [b"".join(parts)] if parts else []  # a small answer in one write (no Nagle delay between parts)
+        if parts:
             connection.phase = "write"
             try:
-                await asyncio.wait_for(loop.sock_sendall(sock, answer), limits.transfer_s(len(answer)))
+                await asyncio.wait_for(self._send_all(sock, parts), limits.transfer_s(sum(map(len, parts))))
             except asyncio.TimeoutError:
                 return  # the client does not read: drop it
         connection.phase = "linger"
