@@ -552,11 +552,15 @@ def test_render_larger_than_the_memory_available_is_refused_with_its_need(monkey
     assert render.check_render_memory(512, 512) < 2 << 30
 
 
-def test_render_estimate_counts_writing_the_file():
-    from bokehfit.cli.render import estimate_write_s
+def test_render_estimate_counts_writing_the_file(tmp_path, monkeypatch):
+    """The estimate that --max-time bounds is the rendering's and the file's writing together (no timing here)."""
+    from bokehfit.cli import main, render
 
-    small, large = estimate_write_s(512, 512, ".png"), estimate_write_s(16384, 16384, ".png")
-    assert large == pytest.approx(small * 1024, rel=0.5) and large > 1.0
+    monkeypatch.setattr(render, "estimate_render_s", lambda *args: (60.0, 1e6))
+    monkeypatch.setattr(render, "estimate_write_s", lambda width, height, suffix: 1e-6 * width * height)
+    with pytest.raises(InputError, match="would take about 2.1 min .*writing the file"):
+        main(["render", "--size", "8192x8192", "--spp", "4", "--out", str(tmp_path / "r.png"), "--max-time", "100"])
+    assert not list(tmp_path.iterdir())
 
 
 def _tiff_with_image_depth(path: Path, depth: int) -> Path:
