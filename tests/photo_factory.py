@@ -456,3 +456,21 @@ def reference_photo(name: str) -> Path:
 def manifest_entry(name: str) -> dict:
     """The manifest's entry for a reference photo."""
     return {entry["file"]: entry for entry in json.loads(MANIFEST.read_text())["photos"]}[name]
+
+
+def reference_labels(name: str):
+    """``(path, DiscLabels)``: a person's disc labels of a reference photo (``discs/NAME.discs.json``
+    beside the photos), checked against the manifest's sha256; the test skips where they are missing."""
+    import pytest
+
+    from bokehfit.discs.labels import read_labels
+
+    path = reference_dir() / "discs" / f"{name}.discs.json"
+    if not path.is_file():
+        why = f"no disc labels {path.name} in {path.parent}"
+        if os.environ.get(REQUIRE_REFERENCE_ENV) == "1":
+            pytest.fail(f"{REQUIRE_REFERENCE_ENV}=1 but {why}", pytrace=False)
+        pytest.skip(why)
+    labels = read_labels(path)
+    assert labels.sha256 == manifest_entry(name)["sha256"], f"{path.name} labels another photo"
+    return path, labels

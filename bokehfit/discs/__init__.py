@@ -36,6 +36,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from bokehfit.discs.candidates import LARGE_DISC_PX, Candidate, find_candidates
+from bokehfit.discs.circles import find_circles
 from bokehfit.discs.measure import RESOLVABLE_PX, Measurement, measure_candidate, split_cluster
 from bokehfit.errors import InputError, check_finite
 
@@ -76,6 +77,8 @@ MAX_LARGE_CANDIDATES = MAX_CANDIDATES // 10
 #: Most cluster candidates measured (the clearest first): each is measured as a whole and split,
 #: a few times the work of a disc, and most blobs of a busy photo are one disc with its glow.
 MAX_CLUSTER_CANDIDATES = MAX_CANDIDATES // 20
+#: Most circles through edges measured per photo (module bokehfit.discs.circles; the clearest first).
+MAX_CIRCLES = MAX_CANDIDATES // 10
 #: A disc whose reliable share of the outline reaches this is seen whole (a stray point or two
 #: near a frame corner or a pixel of bloom do not make it partial).
 FULL_OUTLINE_SEEN = 0.98
@@ -444,7 +447,36 @@ def find_discs(
         else:
             rejected[reason] += 1
             rejections.append(Rejection(where, size, reason))
+    found += _circle_discs(luminance, clipped, measurements, min_diameter_px, min(max_diameter_px, search_max_px),
+                           rejected, rejections)
     return _discs_of(measurements, found, rejected, start, notes, rejections, max_discs)
+
+
+def _circle_discs(luminance, clipped, measurements, min_diameter_px, max_diameter_px, rejected, rejections) -> int:
+    """Measure the circles through the photo's edges (:mod:`bokehfit.discs.circles`: overlapping, faint
+    and ring discs that no blob shows) that the blob search did not measure already, as places
+    (:func:`_measure_place`), the clearest MAX_CIRCLES; kept where they pass the measurement's tests
+    of a disc. Returns how many were measured."""
+    places = find_circles(luminance, min_diameter_px, max_diameter_px)[:MAX_CIRCLES]
+    if not places:
+        return 0
+    seen = [(m.center_xy, m.diameter_px) for m in measurements] + [(r.center_xy, r.diameter_px) for r in rejections]
+    known = cKDTree(np.array([xy for xy, _ in seen])) if seen else None
+    measured = 0
+    for xy, diameter in places:
+        if known is not None and any(0.75 < seen[j][1] / diameter < 1.33 for j in known.query_ball_point(xy, 0.25 * diameter)):
+            continue  # the blob search measured it (a disc, or not one)
+        measured += 1
+        m = _measure_place(luminance, clipped, xy, diameter, min_diameter_px)
+        reason = m if isinstance(m, str) else m.reason
+        if reason is None and not min_diameter_px <= m.diameter_px <= max_diameter_px:
+            reason = "too large"
+        if reason is None:
+            measurements.append(m)
+        else:
+            rejected[reason] += 1
+            rejections.append(Rejection(xy, diameter, reason))
+    return measured
 
 
 def measure_discs_at(
@@ -476,30 +508,35 @@ def measure_discs_at(
     rejected: Counter = Counter()
     rejections: list[Rejection] = []
     measurements: list[Measurement] = []
-    height, width = luminance.shape
     for xy, diameter in places:
-        reason = None
-        if not (0 <= xy[0] < width and 0 <= xy[1] < height):
-            reason = "outside the photo"
+        m = _measure_place(luminance, clipped, xy, diameter)
+        if isinstance(m, str):
+            rejected[m] += 1
+            rejections.append(Rejection(xy, diameter, m))
         else:
-            # Any size is measured (min 1 px): too small to show a shape is said by Disc.resolvable.
-            m = measure_candidate(luminance, clipped, xy, diameter, 0.5 * diameter, MIN_NOISE, 1.0)
-            if isinstance(m, str):
-                reason = m
-            else:
-                parts = [m] + (split_cluster(m) if m.overlaps and m.diameter_px >= 2.0 * RESOLVABLE_PX else [])
-                m = min(parts, key=lambda p: math.hypot(p.center_xy[0] - xy[0], p.center_xy[1] - xy[1]) / diameter
-                        + abs(math.log(p.diameter_px / diameter)))
-                if abs(math.log(m.diameter_px / diameter)) > math.log(2.0) or \
-                        math.hypot(m.center_xy[0] - xy[0], m.center_xy[1] - xy[1]) > 0.5 * diameter:
-                    reason = (f"the outline measured there ({m.diameter_px:.0f} px at {m.center_xy[0]:.0f},"
-                              f" {m.center_xy[1]:.0f}) is not a disc of about {diameter:.0f} px")
-                else:
-                    measurements.append(replace(m, reason=None))
-        if reason is not None:
-            rejected[reason] += 1
-            rejections.append(Rejection(xy, diameter, reason))
+            measurements.append(replace(m, reason=None))
     return _discs_of(measurements, len(places), rejected, start, [], rejections, None)
+
+
+def _measure_place(luminance, clipped, xy, diameter: float, min_diameter_px: float = 1.0) -> Measurement | str:
+    """The disc at a place and about a size (a person's pick, a circle through an edge): measured as a
+    candidate there; where it overlaps others, the part of its cluster closest to the place. A reason
+    where no outline of about that size can be drawn there. The measurement's own ``reason`` (its
+    tests of a disc) is left for the caller to weigh."""
+    height, width = luminance.shape
+    if not (0 <= xy[0] < width and 0 <= xy[1] < height):
+        return "outside the photo"
+    m = measure_candidate(luminance, clipped, xy, diameter, 0.5 * diameter, MIN_NOISE, min_diameter_px)
+    if isinstance(m, str):
+        return m
+    parts = [m] + (split_cluster(m) if m.overlaps and m.diameter_px >= 2.0 * RESOLVABLE_PX else [])
+    m = min(parts, key=lambda p: math.hypot(p.center_xy[0] - xy[0], p.center_xy[1] - xy[1]) / diameter
+            + abs(math.log(p.diameter_px / diameter)))
+    if abs(math.log(m.diameter_px / diameter)) > math.log(2.0) or \
+            math.hypot(m.center_xy[0] - xy[0], m.center_xy[1] - xy[1]) > 0.5 * diameter:
+        return (f"the outline measured there ({m.diameter_px:.0f} px at {m.center_xy[0]:.0f},"
+                f" {m.center_xy[1]:.0f}) is not a disc of about {diameter:.0f} px")
+    return m
 
 
 def _discs_of(measurements, found, rejected, start, notes, rejections, max_discs) -> DiscSearch:

@@ -375,8 +375,8 @@ def _choose_discs(discs: list[Disc], families: tuple[Family, ...], max_discs: in
     ``max_discs`` clearest (:func:`_order_for_fit`): discs on their own before those beside other
     light, shapes that are not elongated before elongated ones, each group in that order. The
     straight families suffice (a rounded polygon lies between its straight one and the circle) and
-    keep the screen cheap. ``models`` is the fit's memo of model signatures
-    (:func:`~bokehfit.fit.signature.screen`); ``shape`` the photo's (rows, columns)."""
+    keep the screen cheap; all of them, whatever shapes the fit tries. ``models`` is the fit's memo of
+    model signatures (:func:`~bokehfit.fit.signature.screen`); ``shape`` the photo's (rows, columns)."""
     pool = _order_for_fit(discs, CHOICE_POOL * max_discs)
     groups: dict[tuple[bool, int], list[Disc]] = {(False, 0): [], (False, 1): [], (True, 0): [], (True, 1): []}
     set_aside: dict[int, str] = {}
@@ -724,7 +724,8 @@ def fit_aperture(
         raise InputError(f"clipped must have the luminance's shape {np.shape(luminance)} (got {np.shape(clipped)})")
     families = families_for(shapes)
     models: dict = {}  # the model signatures of the screens, made once for all discs
-    chosen, set_aside = _choose_discs(discs, families, options.max_discs, models, np.shape(luminance))
+    # Whether a blob is an aperture's image does not hang on the shapes the caller lets the fit try.
+    chosen, set_aside = _choose_discs(discs, FAMILIES, options.max_discs, models, np.shape(luminance))
     if not chosen:
         flagged = {
             "cut by the frame": sum(d.clipped for d in discs),

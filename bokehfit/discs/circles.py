@@ -1,0 +1,89 @@
+"""Disc candidates seen by their edges: circles through the edge of defocused light.
+
+Notes
+-----
+The blob search (:mod:`bokehfit.discs.candidates`) finds light above its
+surround. Where discs overlap, it sees one blob (their light adds up) and keeps
+its brightest part; a faint disc over bright haze, or a soap-bubble disc whose
+centre is no brighter than its surround, is no blob at all. Each of these
+still shows its own edge: a step of one blur width all round, or wherever it
+borders the background. This search looks for that edge.
+
+For each octave band of diameters [s, 2 s) from ``MIN_DIAMETER_PX``, the photo
+is area-averaged so that the band's discs are ``SIDE_PX`` to 2 ``SIDE_PX``
+across (at least ``MIN_REDUCTION``, and enough that the copy has at most
+``MAX_COPY_PIXELS``: the search costs what the copy's edges cost; a band whose
+discs would be under ``SIDE_PX`` on that copy is left to the blob search). On
+the copy's logarithm (a disc of 5 % contrast over bright haze steps as much as
+one of 5 % over a dark ground; ``LOG_FLOOR`` keeps the dark's noise from
+becoming steps), less its mean at the band's scale and over its local spread
+(``SPREAD_CODES`` codes a standard deviation, the spread at least ``MIN_SPREAD``), OpenCV's Hough gradient
+transform (``HOUGH_GRADIENT_ALT``, which scores each circle by how much of it
+the edges follow, 0–1) keeps the circles followed over at least
+``MIN_PERFECTNESS`` of their length. Each is a place to measure
+(:func:`bokehfit.discs.measure_discs_at`'s measurement), not a disc: the
+measurement and the fit decide.
+"""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+
+__all__ = ["find_circles", "MIN_DIAMETER_PX", "SIDE_PX", "MIN_PERFECTNESS"]
+
+#: Smallest disc sought by its edge (px): smaller discs are blobs the blob search sees whole.
+MIN_DIAMETER_PX = 32.0
+#: Smallest disc of a band, in pixels of the copy it is searched on (the Hough transform needs
+#: a radius of several pixels to tell a circle's arc from a corner).
+SIDE_PX = 16.0
+#: Least reduction of a band's copy: the photo halved at least (its noise averaged 2 × 2).
+MIN_REDUCTION = 2.0
+#: Largest copy searched (pixels): the transform's cost follows the copy's edge pixels.
+MAX_COPY_PIXELS = 1 << 21
+#: Linear light added before the logarithm (1 % of white): below it, noise is not a step.
+LOG_FLOOR = 0.01
+#: 8-bit codes per local standard deviation of the normalised copy, and the Canny threshold on it
+#: (a step of 2.5 local standard deviations).
+SPREAD_CODES = 40.0
+CANNY_HIGH = 100.0
+#: Least local spread of the logarithm: on smooth ground the edge threshold (CANNY_HIGH, 2.5 spreads)
+#: is then a step of at least 5 % of the level, the faintest disc sought; a fainter swell of the
+#: light (haze, a toned sky, JPEG's smooth gradients) is no edge.
+MIN_SPREAD = 0.02
+#: Least share of a circle the edges follow (OpenCV's HOUGH_GRADIENT_ALT param2).
+MIN_PERFECTNESS = 0.8
+
+
+def _normalised(copy: np.ndarray, scale_px: float) -> np.ndarray:
+    """The copy's logarithm less its local mean, over its local spread, as 8-bit codes about 128."""
+    logged = np.log(copy.astype(np.float32) + LOG_FLOOR)
+    residual = logged - cv2.GaussianBlur(logged, (0, 0), scale_px)
+    spread = np.maximum(np.sqrt(cv2.GaussianBlur(residual * residual, (0, 0), scale_px)), MIN_SPREAD)
+    return np.clip(residual / spread * SPREAD_CODES + 128.0, 0, 255).astype(np.uint8)
+
+
+def find_circles(luminance: np.ndarray, min_diameter_px: float, max_diameter_px: float) -> list[tuple[tuple[float, float], float]]:
+    """Places of circles through the edges of the photo's light: ((x, y), diameter_px), full-resolution
+    pixels, band by band from the smallest (module notes)."""
+    height, width = luminance.shape
+    least = max(math.sqrt(height * width / MAX_COPY_PIXELS), MIN_REDUCTION)
+    places = []
+    band = max(min_diameter_px, MIN_DIAMETER_PX)
+    while band < max_diameter_px:
+        factor = max(band / SIDE_PX, least)
+        side = band / factor  # the band's smallest disc on the copy
+        size = (round(width / factor), round(height / factor))
+        if side >= SIDE_PX - 1e-9 and min(size) >= 2.0 * band / factor:
+            copy = cv2.resize(luminance, size, interpolation=cv2.INTER_AREA)
+            found = cv2.HoughCircles(_normalised(copy, side), cv2.HOUGH_GRADIENT_ALT, 1.5, 0.5 * side,
+                                     param1=CANNY_HIGH, param2=MIN_PERFECTNESS,
+                                     minRadius=max(1, int(0.4 * side)), maxRadius=int(math.ceil(1.25 * side)))
+            for x, y, r in ([] if found is None else found[0]):
+                # Copy pixel centres to full-resolution ones (area averaging by ``factor``).
+                places.append((((x + 0.5) * width / size[0] - 0.5, (y + 0.5) * height / size[1] - 0.5),
+                               2.0 * r * factor))
+        band *= 2.0
+    return places

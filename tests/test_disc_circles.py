@@ -1,0 +1,63 @@
+"""Disc candidates seen by their edges (:mod:`bokehfit.discs.circles`): overlapping discs, each found
+by its own arc where the blob search sees one blob; judged on a person's labels of real photos."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from bokehfit.apertures import make_aperture
+from bokehfit.discs import find_discs
+from bokehfit.discs.circles import MIN_DIAMETER_PX, find_circles
+from bokehfit.discs.labels import matches
+from bokehfit.synthetic import SyntheticDisc, render_discs
+
+CIRCLE = make_aperture("circle", 0.0)
+#: Three discs of 80 px in a chain, each overlapping the next by 24 px, on a haze that brightens to the right.
+CHAIN = [SyntheticDisc((100 + 56 * i, 200), 80.0, CIRCLE, brightness=0.3) for i in range(3)]
+
+
+def _chain_photo(seed=1):
+    width, height = 420, 400
+    haze = np.broadcast_to(0.3 + 0.2 * np.arange(width, dtype=np.float32) / width, (height, width))
+    return render_discs(width, height, CHAIN, background=np.ascontiguousarray(haze), edge_blur_px=1.5,
+                        noise_sigma=0.004, seed=seed)
+
+
+def test_each_disc_of_a_chain_is_a_circle_of_its_own():
+    circles = find_circles(_chain_photo(), 8.0, 500.0)
+    for disc in CHAIN:
+        near = [(xy, d) for xy, d in circles if math.dist(xy, disc.center_xy) < 0.1 * disc.diameter_px]
+        assert near, (disc.center_xy, circles)
+        assert any(abs(d / disc.diameter_px - 1) < 0.1 for _, d in near), near
+
+
+def test_no_circle_in_noise_or_a_smooth_swell():
+    """Noise, and a swell of the light (a toned sky) of under 5 % of its level, are no edges."""
+    rng = np.random.default_rng(0)
+    yy, xx = np.mgrid[0:300, 0:400]
+    swell = 0.4 * (1 + 0.04 * np.exp(-((xx - 200) ** 2 + (yy - 150) ** 2) / (2 * 40.0 ** 2)))
+    image = (swell + rng.normal(0, 0.004, swell.shape)).astype(np.float32)
+    assert find_circles(image, 8.0, 500.0) == []
+
+
+def test_small_discs_are_left_to_the_blob_search():
+    image = _chain_photo()
+    assert find_circles(image, 8.0, MIN_DIAMETER_PX) == []
+
+
+@pytest.mark.parametrize("name, least", [("02_dew-glints_aaron-burden.jpg", 18), ("07_touch-the-light_canon-50d-ef100.jpg", 6)])
+def test_real_overlapping_discs_are_found_by_their_edges(reference_photo, name, least):
+    """Photo 02's large dew discs, many touching, and photo 07's heavily overlapping 170-210 px discs:
+    the blob search alone found 15 of 41 and 4 of 13 of the discs a person labelled usable."""
+    from photo_factory import reference_labels
+
+    from bokehfit.io import load_photo
+
+    _, labels = reference_labels(name)
+    photo = load_photo(reference_photo(name))
+    found = [d for d in find_discs(photo.luminance, photo.clipped, min_diameter_px=8).discs if d.usable]
+    hits = sum(any(matches(d.center_xy, d.diameter_px, label) for d in found) for label in labels.usable)
+    assert hits >= least, f"{hits} of {len(labels.usable)} labelled usable discs found usable"
