@@ -118,11 +118,17 @@ METADATA_MAX_BYTES = 4 << 20
 #: Most bytes inflated from all the metadata chunks of one file together (ICC profile, XMP): a file of
 #: ten thousand compressed chunks costs no more than a few legitimate ones; past it, the rest is skipped.
 METADATA_INFLATE_BUDGET_BYTES = 4 * METADATA_MAX_BYTES
-#: Most pixels a JPEG may claim per byte of the file. Every 8×8 block of the luminance is coded in
-#: the first (DC) scan with at least one bit (Huffman codes are 1 to 16 bits long, ITU T.81 C), so
-#: a Huffman-coded JPEG of B bytes holds at most 8·B blocks, 512·B pixels. Arithmetic-coded and lossless
-#: JPEGs are held to the same bound: a photo's sensor noise costs far more than a bit per block.
+#: Most pixels a Huffman-coded JPEG may claim per byte of the file. Every 8×8 block of the luminance
+#: is coded in the first (DC) scan with at least one bit (Huffman codes are 1 to 16 bits long, ITU T.81
+#: Annex C), so a file of B bytes holds at most 8·B blocks, 512·B pixels, whatever the image; lossless
+#: JPEG spends a bit a pixel at least. Arithmetic coding (SOF9–SOF15, rare: no camera writes it) can
+#: code a flat block in less than a bit, so for it the bound is not a theorem but a photo's: a 24-MP
+#: frame would have to fit in 47 kB, which only a nearly all-black frame does, and a refused file is
+#: told to re-encode with Huffman coding. Without the bound, a 143 kB file claiming 15811² pixels
+#: decoded for 40–117 s at 2.4 GB.
 JPEG_MAX_PIXELS_PER_BYTE = 512
+#: Start-of-frame markers of arithmetic-coded JPEGs (ITU T.81 Table B.1).
+_ARITHMETIC_SOF = frozenset({0xC9, 0xCA, 0xCB, 0xCD, 0xCE, 0xCF})
 #: Largest ratio of deflate: one length code (≥ 1 bit) and one distance code (≥ 1 bit) repeat at
 #: most 258 bytes, so 2 bits give at most 258 bytes (RFC 1951 §3.2.5): 1032 bytes per byte.
 DEFLATE_MAX_RATIO = 1032
@@ -708,6 +714,7 @@ class _Meta:
     png_gamma: float | None = None
     notes: list[str] = field(default_factory=list)
     bits_per_pixel: int = 24  #: PNG: bit depth × channels
+    arithmetic: bool = False  #: JPEG: arithmetic-coded
     image_data_bytes: int = 0  #: PNG: the IDAT chunks' total length
 
 
@@ -750,6 +757,7 @@ def _jpeg_header(name: str, data: bytes) -> tuple[_Meta, int]:
             if len(payload) < 6:
                 raise InputError(damaged)
             meta.height, meta.width = struct.unpack(">HH", payload[1:5])
+            meta.arithmetic = marker in _ARITHMETIC_SOF
             components = payload[5]
         elif marker == 0xDA:
             break
@@ -774,10 +782,11 @@ def _load_jpeg(path: Path, data: bytes, max_pixels: int, progress: bool) -> Phot
         raise InputError(f"{path.name} is a JPEG file that gives no image size; re-export it")
     _check_size(path.name, meta.width, meta.height, max_pixels)
     blocks = math.ceil(meta.width / 8) * math.ceil(meta.height / 8)
-    if blocks > 8 * len(data):  # at least one bit per 8×8 block of the luminance (JPEG_MAX_PIXELS_PER_BYTE)
+    if blocks > 8 * len(data):  # a bit per 8×8 block of the luminance at least (JPEG_MAX_PIXELS_PER_BYTE)
+        fix = "re-encode it with Huffman coding" if meta.arithmetic else "copy or export it again"
         raise InputError(
             f"{path.name}: its header claims {meta.width}×{meta.height} px, which {len(data)} bytes of JPEG can't hold "
-            f"(at most {JPEG_MAX_PIXELS_PER_BYTE} px a byte); the file is truncated or crafted: copy or export it again"
+            f"(at most {JPEG_MAX_PIXELS_PER_BYTE} px a byte); the file is truncated or crafted: {fix}"
         )
     if components not in (1, 3, 4):
         raise InputError(f"{path.name} is a {components}-channel JPEG; convert it to RGB")
