@@ -1081,6 +1081,7 @@ def _load_tiff(path: Path, data: bytes, max_pixels: int, progress: bool) -> Phot
         depth = int(getattr(page, "imagedepth", 1) or 1)
         if depth != 1:
             raise InputError(f"{path.name} is a volume TIFF (ImageDepth {depth}), not a photo; save one image as TIFF")
+        _check_tiff_data_size(path.name, page, width, height)
         photometric = int(page.photometric)
         if photometric in (3, 5, 8, 32803, 34892) or page.bitspersample == 1:
             kind = {3: "palette", 5: "CMYK", 8: "CIELab", 32803: "raw CFA", 34892: "linear raw"}.get(
@@ -1122,6 +1123,32 @@ def _load_tiff(path: Path, data: bytes, max_pixels: int, progress: bool) -> Phot
         path, luminance, clipped, display, False, exif, encoding.describe(), encoding.colour_space, meta.notes,
         decoding=encoding.lut(8),
     )
+
+
+#: Most bytes each TIFF compression can give per byte of its data: deflate 1032 (DEFLATE_MAX_RATIO);
+#: LZW 4096 bytes per code of at least 9 bits, 3641; PackBits 128 bytes per 2, 64; JPEG 512 pixels a byte
+#: (JPEG_MAX_PIXELS_PER_BYTE) of at most 3 bytes each. Other compressions are not bounded here.
+_TIFF_MAX_RATIO = {5: 3641, 7: 3 * JPEG_MAX_PIXELS_PER_BYTE, 8: DEFLATE_MAX_RATIO, 32946: DEFLATE_MAX_RATIO, 32773: 64}
+
+
+def _check_tiff_data_size(name: str, page, width: int, height: int) -> None:
+    """``InputError`` if the image a TIFF's header claims can't come out of its strips' or tiles' bytes."""
+    try:
+        compression = int(page.compression)
+        stored = sum(int(n) for n in page.databytecounts)
+        bits = int(page.bitspersample) * int(page.samplesperpixel)
+        pieces = len(page.databytecounts)
+    except (TypeError, ValueError, AttributeError):
+        return
+    ratio = 1 if compression == 1 else _TIFF_MAX_RATIO.get(compression)
+    if ratio is None:
+        return
+    raw = height * math.ceil(width * bits / 8)
+    if raw > ratio * (stored + 64 * pieces) + 4096:
+        raise InputError(
+            f"{name}: its header claims {width}×{height} px, which {stored} bytes of image data"
+            f" (compression {compression}) can't hold; the file is truncated or crafted: copy or export it again"
+        )
 
 
 def _short(error: Exception) -> str:

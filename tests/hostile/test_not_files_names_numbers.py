@@ -250,6 +250,27 @@ def test_png_whose_header_claims_more_than_its_data_can_hold_is_refused(tmp_path
         load_photo(path)
 
 
+def test_tiff_whose_header_claims_more_than_its_strips_can_hold_is_refused(tmp_path):
+    import tifffile
+
+    from bokehfit.io import load_photo
+
+    path = tmp_path / "claim.tif"
+    tifffile.imwrite(path, np.zeros((64, 64, 3), np.uint8), compression="zlib")
+    data = bytearray(path.read_bytes())
+    for tag in (256, 257):  # ImageWidth, ImageLength: 15000 each
+        for kind, form in ((3, "<H"), (4, "<I")):
+            at = data.find(struct.pack("<HHI", tag, kind, 1))
+            if at >= 0:
+                data[at + 8 : at + 8 + struct.calcsize(form)] = struct.pack(form, 15000)
+    path.write_bytes(bytes(data))
+    with pytest.raises(InputError, match="can't hold"):
+        load_photo(path)
+    tifffile.imwrite(tmp_path / "flat.tif", np.zeros((2000, 3000, 3), np.uint8), compression="zlib",
+                     compressionargs={"level": 9}, rowsperstrip=2000)  # the best deflate does: still read
+    assert load_photo(tmp_path / "flat.tif").width == 3000
+
+
 def test_photo_file_larger_than_any_photo_is_refused_unread(tmp_path):
     """A sparse file of 5 GiB named .jpg: refused from its size, not read into memory."""
     from bokehfit.io import load_photo
