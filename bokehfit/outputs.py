@@ -17,6 +17,9 @@ bokehfit's own outputs. Every file bokehfit writes carries a mark, and
 ``.parquet``  a ``bokehfit_version`` key in the footer's key-value metadata (the survey's export)
 ========  =====================================================================
 
+Only regular files are ever opened to look for the mark, with ``O_NONBLOCK`` after a
+``stat`` (:func:`open_regular`): an output path naming a FIFO, a device or a socket is
+refused without being opened (opening a FIFO to read would wait for a writer forever).
 Any other existing file (a photo, notes, another program's output, a file of
 another type) is refused: :func:`check_output_path` and the writers raise
 :class:`~bokehfit.errors.InputError` naming it, and the user moves it or chooses
@@ -26,8 +29,13 @@ another name. bokehfit never picks another name by itself.
 write removes its own: on any exception, on Ctrl-C, and on SIGTERM (which, while
 a write is under way in the main thread, becomes ``SystemExit(143)``). One left
 by a process that was killed outright (SIGKILL, a crash, a power cut) is removed
-by the next write into that folder, once no process with that PID is running
-(on POSIX systems; elsewhere they are left alone).
+by the next run that checks an output in that folder (:func:`check_output_path`, before
+any work) or writes there, once no process with that PID is running, or the process now
+holding that PID started after the file was last written (Linux; the PID was reused).
+Elsewhere than POSIX systems they are left alone.
+
+**Text** written into a page or a report goes through :func:`encode_text`: a file name
+that is not valid UTF-8 (lone surrogates in Python) becomes U+FFFD instead of failing.
 
 **Test hook.** ``BOKEHFIT_WRITE_PAUSE_S=SECONDS`` makes every write wait that
 long between finishing its temporary file and renaming it, so that a test can
@@ -63,12 +71,12 @@ __all__ = [
     "KERNEL_FORMATS",
     "WRITE_PAUSE_ENV",
     "check_output_path",
-    "file_kind",
-    "make_folder",
-    "open_regular",
     "check_replaceable",
     "encode_text",
+    "file_kind",
     "is_bokehfit_output",
+    "make_folder",
+    "open_regular",
     "remove_stale_temporaries",
     "replace_surrogates",
     "write_atomic",
