@@ -14,10 +14,21 @@ file is only ever read.
 
 Hostile and damaged files
 -------------------------
+- Only a regular file is read, of at most :data:`MAX_FILE_BYTES` (a FIFO, a
+  device or a link to one is refused unopened).
 - Every chunk and segment length is checked against the file's size before
   it is read; metadata larger than :data:`METADATA_MAX_BYTES` (XMP:
   :data:`~bokehfit.io.exif.XMP_MAX_BYTES`), stored or after decompression,
-  is skipped with a note, never inflated in full.
+  is skipped with a note, never inflated in full; all of a PNG's metadata
+  chunks together inflate to at most :data:`METADATA_INFLATE_BUDGET_BYTES`
+  (one ICC profile and one XMP packet are read; more are skipped, counted).
+- The size a header claims is weighed against the bytes that must hold it,
+  before decoding: at most :data:`JPEG_MAX_PIXELS_PER_BYTE` pixels a byte of
+  JPEG, :data:`DEFLATE_MAX_RATIO` bytes a byte of PNG image data, and each TIFF
+  compression's largest ratio; a file that claims more is truncated or crafted.
+- What LibRaw and tifffile print about a damaged file (on file descriptor 2,
+  through logging) is captured: a note where the file is read, nothing where
+  it is refused with its one-line error.
 - A JPEG whose image data is corrupt (libjpeg's "Corrupt JPEG data" warnings)
   is read, not refused: the decoder's messages are kept off the terminal and
   ``Photo.notes`` says in one line that the file is damaged and which rows
