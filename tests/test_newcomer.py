@@ -11,6 +11,10 @@ from pathlib import Path
 import bokehfit
 
 README = Path(__file__).resolve().parents[1] / "README.md"
+#: The pages the README links to for everything past the quick start.
+DOCS = README.parent / "docs"
+#: The most characters README.md may hold (issue 24): past the quick start, text goes to docs/.
+README_MAX_CHARS = 10_000
 #: The public API help(bokehfit) must name, each importable from bokehfit.
 PUBLIC = ("compare_photo", "Comparison", "load_photo", "find_discs", "fit_aperture", "make_aperture",
           "compute_kernel", "survey")
@@ -47,7 +51,36 @@ def test_readme_shows_compare_photo_and_its_result_from_python():
         assert attribute in example
 
 
-def test_readme_needs_no_tool_it_does_not_install():
-    for block in re.findall(r"^```sh\n(.*?)^```", _readme(), flags=re.S | re.M):
-        for line in block.splitlines():
-            assert not re.match(r"\s*duckdb\s", line), f"the duckdb command line is not installed: {line}"
+def _pages() -> list[Path]:
+    return [README, *sorted(DOCS.glob("*.md"))]
+
+
+def test_readme_and_docs_need_no_tool_they_do_not_install():
+    for page in _pages():
+        for block in re.findall(r"^```sh\n(.*?)^```", page.read_text(encoding="utf-8"), flags=re.S | re.M):
+            for line in block.splitlines():
+                assert not re.match(r"\s*duckdb\s", line), f"{page.name}: the duckdb command line is not installed: {line}"
+
+
+def test_readme_is_a_page_a_person_reads():
+    length = len(_readme())
+    assert length <= README_MAX_CHARS, (f"README.md holds {length} characters, more than {README_MAX_CHARS}: "
+                                        "move the detail to its page in docs/ and link it")
+
+
+def _anchors(page: Path) -> set[str]:
+    """The anchors of a page's headings, as GitHub makes them (lower case, punctuation dropped)."""
+    headings = re.findall(r"^#+ (.+)$", page.read_text(encoding="utf-8"), flags=re.M)
+    return {re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-") for heading in headings}
+
+
+def test_readme_and_docs_links_resolve():
+    for page in _pages():
+        for target in re.findall(r"\]\(([^)\s]+)\)", page.read_text(encoding="utf-8")):
+            if re.match(r"[a-z]+://", target):
+                continue
+            path, _, anchor = target.partition("#")
+            linked = page.parent / path if path else page
+            assert linked.exists(), f"{page.name} links to {target}, which does not exist"
+            if anchor and linked.suffix == ".md":
+                assert anchor in _anchors(linked), f"{page.name} links to {target}: no such heading"
