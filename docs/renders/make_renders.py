@@ -1,4 +1,4 @@
-"""Remake the real-lens aperture renders of the README (design.md §3b), with the package's own renderer.
+"""Remake the real-lens aperture renders of docs/render.md (design.md §3b), with the package's own renderer.
 
 Run from anywhere with bokehfit installed::
 
