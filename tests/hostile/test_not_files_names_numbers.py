@@ -518,7 +518,9 @@ def test_next_run_removes_stale_temporaries_even_when_it_writes_nothing(tmp_path
     dead_pid = int(dead.stdout)
     stale = tmp_path / f".k.npy.bokehfit-tmp-{dead_pid}-0a1b2c3d.npy"
     stale.write_bytes(b"half")
-    reused = tmp_path / f".k.npy.bokehfit-tmp-{os.getpid()}0-0a1b2c3d.npy"  # a number no process has
+    pid_max = Path("/proc/sys/kernel/pid_max")
+    impossible = int(pid_max.read_text()) + 1 if pid_max.exists() else 2**22 + 1  # a number no process can have
+    reused = tmp_path / f".k.npy.bokehfit-tmp-{impossible}-0a1b2c3d.npy"
     reused.write_bytes(b"half")
     young = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
     try:
