@@ -53,6 +53,11 @@ CANNY_HIGH = 100.0
 #: is then a step of at least 5 % of the level, the faintest disc sought; a fainter swell of the
 #: light (haze, a toned sky, JPEG's smooth gradients) is no edge.
 MIN_SPREAD = 0.02
+#: A band's copy whose light varies mostly at scales under FINE_SCALE of its smallest disc (more than
+#: MAX_FINE_SHARE of the variance about its local mean) shows texture, not discs of the band: a carpet
+#: of small glints or grass, where every pixel is an edge and the transform's work has no bound.
+FINE_SCALE = 0.25
+MAX_FINE_SHARE = 0.5
 #: Least share of a circle the edges follow (OpenCV's HOUGH_GRADIENT_ALT param2).
 MIN_PERFECTNESS = 0.8
 
@@ -63,6 +68,16 @@ def _normalised(copy: np.ndarray, scale_px: float) -> np.ndarray:
     residual = logged - cv2.GaussianBlur(logged, (0, 0), scale_px)
     spread = np.maximum(np.sqrt(cv2.GaussianBlur(residual * residual, (0, 0), scale_px)), MIN_SPREAD)
     return np.clip(residual / spread * SPREAD_CODES + 128.0, 0, 255).astype(np.uint8)
+
+
+def _fine_share(copy: np.ndarray, side: float) -> float:
+    """Share of the copy's variance about its local mean (at the band's scale) that lies at scales
+    under FINE_SCALE · ``side``."""
+    image = copy.astype(np.float32)
+    coarse = image - cv2.GaussianBlur(image, (0, 0), side)
+    fine = image - cv2.GaussianBlur(image, (0, 0), FINE_SCALE * side)
+    total = float(np.mean(coarse * coarse))
+    return float(np.mean(fine * fine)) / total if total > 0 else 0.0
 
 
 def find_circles(luminance: np.ndarray, min_diameter_px: float, max_diameter_px: float) -> list[tuple[tuple[float, float], float]]:
@@ -78,6 +93,9 @@ def find_circles(luminance: np.ndarray, min_diameter_px: float, max_diameter_px:
         size = (round(width / factor), round(height / factor))
         if side >= SIDE_PX - 1e-9 and min(size) >= 2.0 * band / factor:
             copy = cv2.resize(luminance, size, interpolation=cv2.INTER_AREA)
+            if _fine_share(copy, side) > MAX_FINE_SHARE:
+                band *= 2.0
+                continue
             found = cv2.HoughCircles(_normalised(copy, side), cv2.HOUGH_GRADIENT_ALT, 1.5, 0.5 * side,
                                      param1=CANNY_HIGH, param2=MIN_PERFECTNESS,
                                      minRadius=max(1, int(0.4 * side)), maxRadius=int(math.ceil(1.25 * side)))
