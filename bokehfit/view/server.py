@@ -94,6 +94,7 @@ from importlib import resources
 from urllib.parse import parse_qs, urlsplit
 
 import numpy as np
+import orjson
 
 from bokehfit import __version__
 from bokehfit.apertures import SHAPES, Aperture, MaskTable, make_aperture
@@ -837,7 +838,8 @@ def parse_json_body(
     numbers with an exponent of three digits, the only short ones that can
     leave the float range, are read one by one (at most
     ``MAX_JSON_BIG_EXPONENTS``). The body is then parsed by the standard
-    library's C parser, numbers included (a Python hook per number would
+    orjson (the standard library's C parser where orjson refuses it, for its
+    messages), numbers included (a Python hook per number would
     cost more than 0.1 s per MiB of short numbers), with the cyclic garbage
     collector paused (it would walk every new list again and again, for
     nothing: parsed JSON holds no cycles).
@@ -862,6 +864,13 @@ def parse_json_body(
     except UnicodeDecodeError as error:
         raise InputError(f"the body is not JSON: it is not UTF-8 (byte {error.start})") from None
     with _collector_paused():
+        try:
+            # orjson (strict RFC 8259: no NaN or Infinity) parses short numbers about four times
+            # faster than the standard library; its refusals are read again by the standard
+            # library's parser, whose messages name what is wrong in this module's words.
+            return orjson.loads(text)
+        except orjson.JSONDecodeError:
+            pass
         try:
             return json.loads(text, parse_constant=no_constant)
         except RecursionError:  # not reached after the depth check; kept as the last guard
