@@ -38,7 +38,10 @@ import pytest
 from bokehfit.apertures import MaskTable
 from bokehfit.view import ViewerServer
 from bokehfit.view.server import MAX_BODY_BYTES, MAX_JSON_VALUES, json_shape
-from test_view_server import assert_refused, compare_json, exchange, page_token, parse_answer, png_bytes, request
+# server (a module-scoped viewer) and no_traceback (autouse) are the viewer tests' fixtures, shared.
+from test_view_server import (  # noqa: F401
+    assert_refused, compare_json, exchange, no_traceback, page_token, parse_answer, png_bytes, request, server,
+)
 
 #: Longest wait for one answer where nothing should delay it (s): generous, the machine may be busy.
 ANSWER_TIMEOUT_S = 15.0
@@ -124,18 +127,6 @@ def connect(port: int, count: int, stack: ExitStack, within_s: float = ANSWER_TI
     for sock in socks:
         sock.settimeout(ANSWER_TIMEOUT_S)
     return socks
-
-
-@pytest.fixture(scope="module")
-def server():
-    with ViewerServer(0, size=(64, 48)).start() as running:
-        yield running
-
-
-@pytest.fixture(autouse=True)
-def no_traceback(capfd):
-    yield
-    assert "Traceback" not in capfd.readouterr().err
 
 
 # --- writes from other web sites ------------------------------------------------------------
