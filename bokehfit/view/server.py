@@ -176,6 +176,8 @@ MAX_JSON_INT_DIGITS = 32
 #: Numbers with an exponent of three digits read one by one for the float range;
 #: a body with more is refused (a compare result has none or a few).
 MAX_JSON_BIG_EXPONENTS = 1000
+#: JSON's white space at the start of a document.
+_JSON_SPACE = re.compile(r"[ \t\r\n]*")
 #: Most values (and keys) in a JSON body. A compare result (written with indent=1)
 #: spends at least 14 bytes a value: at most 600,000 in MAX_BODY_BYTES. A million
 #: empty objects take 73 MB once parsed (2.9 MiB of text); MAX_BODY_BYTES of them
@@ -801,7 +803,8 @@ def _check_exponents(body: bytes | bytearray, positions: tuple[int, ...]) -> Non
 
 
 def parse_json_body(
-    body: bytes | bytearray, *, max_depth: int = MAX_JSON_DEPTH, max_int_digits: int = MAX_JSON_INT_DIGITS, max_values: int = MAX_JSON_VALUES
+    body: bytes | bytearray, *, max_depth: int = MAX_JSON_DEPTH, max_int_digits: int = MAX_JSON_INT_DIGITS, max_values: int = MAX_JSON_VALUES,
+    object_only: bool = False,
 ):
     """A request body parsed as strict JSON, with bounded nesting, size and numbers, in time linear in its length.
 
@@ -816,6 +819,9 @@ def parse_json_body(
     max_values : int
         Most values and keys accepted (:func:`json_shape`): what bounds the
         parse's time and memory, whatever the body's length.
+    object_only : bool
+        Refuse, before parsing, a document that is not a JSON object (a
+        compare result is one): its values then cost no parse.
 
     Returns
     -------
@@ -863,6 +869,9 @@ def parse_json_body(
         text = body.decode("utf-8")
     except UnicodeDecodeError as error:
         raise InputError(f"the body is not JSON: it is not UTF-8 (byte {error.start})") from None
+    start = _JSON_SPACE.match(text).end()
+    if object_only and text[start : start + 1] != "{":
+        raise InputError("the body must be a `bokehfit compare --json` result: a JSON object with an 'aperture' object")
     with _collector_paused():
         try:
             # orjson (strict RFC 8259: no NaN or Infinity) parses short numbers about four times
@@ -1220,7 +1229,7 @@ class _Handler(BaseHTTPRequestHandler):
             answer = mask_upload(body, self.server.masks)
         else:
             with _collector_paused():  # the document is dropped before the collector runs again
-                answer = settings_from_compare(parse_json_body(body))
+                answer = settings_from_compare(parse_json_body(body, object_only=True))
         self._json(HTTPStatus.OK, answer)
 
 
