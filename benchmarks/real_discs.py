@@ -67,16 +67,13 @@ def why_missed(comparison, score: DiscScore) -> Counter:
     found at its place with another size, a candidate measured and rejected there (the reason), or
     no candidate at all."""
     from bokehfit.compare import disc_problems
-    from bokehfit.discs.labels import MATCH_CENTRE_REL, matches
+    from bokehfit.discs.labels import at_place, matches
 
     reasons = Counter()
     for label in score.missed:
-        def near(xy):
-            return ((xy[0] - label.center_xy[0]) ** 2 + (xy[1] - label.center_xy[1]) ** 2) ** 0.5 \
-                <= MATCH_CENTRE_REL * label.diameter_px
         found = [d for d in comparison.search.discs if matches(d.center_xy, d.diameter_px, label)]
-        placed = [d for d in comparison.search.discs if near(d.center_xy)]
-        rejected = [r for r in comparison.search.rejections if near(r.center_xy)]
+        placed = [d for d in comparison.search.discs if at_place(d.center_xy, label)]
+        rejected = [r for r in comparison.search.rejections if at_place(r.center_xy, label)]
         if found:
             reasons["found, not usable: " + ", ".join(disc_problems(found[0])).split(" (")[0]] += 1
         elif placed:
@@ -104,6 +101,7 @@ def main(argv=None) -> int:
     manifest = json.loads(MANIFEST.read_text(encoding="utf-8"))
     pooled = DiscScore(0, 0, 0)
     verdicts = {"own": Counter(), "person": Counter()}
+    measured = [0, 0]  # the person's discs measured usable at their places, of all
     rows = []
     for entry in manifest["photos"]:
         if args.only and not any(entry["file"].startswith(o) for o in args.only):
@@ -138,8 +136,12 @@ def main(argv=None) -> int:
             person = compare_photo(photo, discs=labels_path)
             mine = row(person, entry["label"], time.perf_counter() - start)
             verdicts["person"][mine["verdict"].split(" (")[0]] += 1
-            print(f"  person's discs ({len(labels.usable)}): {mine['answer']}  {mine['status']} -> {mine['verdict']}"
-                  f"  [{mine['seconds']:.1f} s]")
+            # How many of the person's discs the measurement draws a usable outline for, at their places.
+            mine["measured_usable"] = score_discs(labels, places(person.usable_discs), []).usable_found
+            measured[0] += mine["measured_usable"]
+            measured[1] += len(labels.usable)
+            print(f"  person's discs ({len(labels.usable)}, {mine['measured_usable']} measured usable): "
+                  f"{mine['answer']}  {mine['status']} -> {mine['verdict']}  [{mine['seconds']:.1f} s]")
             result["person"] = mine
         rows.append(result)
     figures = pooled.to_json()
@@ -148,6 +150,8 @@ def main(argv=None) -> int:
         pooled.used, ", ".join(f"{n} {w}" for w, n in pooled.used_as.most_common()),
         "-" if pooled.junk_share is None else f"{pooled.junk_share:.1%}",
         "-" if figures["median_abs_diameter_error"] is None else f"{figures['median_abs_diameter_error']:.1%}"))
+    if measured[1]:
+        print(f"the person's discs measured usable at their places: {measured[0]}/{measured[1]}")
     for who, counted in verdicts.items():
         if counted:
             print(f"verdicts ({who} discs): " + ", ".join(f"{n} {v}" for v, n in counted.most_common()))

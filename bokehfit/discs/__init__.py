@@ -77,6 +77,10 @@ MAX_LARGE_CANDIDATES = MAX_CANDIDATES // 10
 #: Most cluster candidates measured (the clearest first): each is measured as a whole and split,
 #: a few times the work of a disc, and most blobs of a busy photo are one disc with its glow.
 MAX_CLUSTER_CANDIDATES = MAX_CANDIDATES // 20
+#: Two measurements are of one disc when their centres lie within this share of the diameter and
+#: the ratio of their sizes within these bounds.
+SAME_DISC_CENTRE_REL = 0.25
+SAME_DISC_SIZE_RATIOS = (0.75, 1.33)
 #: Most circles through edges measured per photo (module bokehfit.discs.circles; the clearest first).
 MAX_CIRCLES = MAX_CANDIDATES // 10
 #: A disc whose reliable share of the outline reaches this is seen whole (a stray point or two
@@ -464,7 +468,8 @@ def _circle_discs(luminance, clipped, measurements, min_diameter_px, max_diamete
     known = cKDTree(np.array([xy for xy, _ in seen])) if seen else None
     measured = 0
     for xy, diameter in places:
-        if known is not None and any(0.75 < seen[j][1] / diameter < 1.33 for j in known.query_ball_point(xy, 0.25 * diameter)):
+        if known is not None and any(_same_size(seen[j][1], diameter)
+                                     for j in known.query_ball_point(xy, SAME_DISC_CENTRE_REL * diameter)):
             continue  # the blob search measured it (a disc, or not one)
         measured += 1
         m = _measure_place(luminance, clipped, xy, diameter, min_diameter_px)
@@ -624,6 +629,13 @@ def _own_outlines(measurements: list[Measurement]) -> tuple[list[np.ndarray], li
     return own, clusters
 
 
+def _same_size(diameter_px: float, other_px: float) -> bool:
+    """Two measurements of one disc: the ratio of their sizes within SAME_DISC_SIZE_RATIOS (their
+    centres within SAME_DISC_CENTRE_REL of the diameter)."""
+    low, high = SAME_DISC_SIZE_RATIOS
+    return low < diameter_px / other_px < high
+
+
 def _distinct_measurements(measurements: list[Measurement]) -> list[Measurement]:
     """One measurement per disc: two candidates that converged on the same outline count once."""
     kept: list[Measurement] = []
@@ -636,8 +648,8 @@ def _distinct_measurements(measurements: list[Measurement]) -> list[Measurement]
         if dropped[i]:
             continue
         kept.append(m)
-        for j in tree.query_ball_point(m.center_xy, 0.25 * m.diameter_px):
+        for j in tree.query_ball_point(m.center_xy, SAME_DISC_CENTRE_REL * m.diameter_px):
             other = order[j]
-            if j > i and 0.75 < other.diameter_px / m.diameter_px < 1.33:
+            if j > i and _same_size(other.diameter_px, m.diameter_px):
                 dropped[j] = True
     return kept

@@ -45,6 +45,7 @@ __all__ = [
     "DiscLabels",
     "DiscScore",
     "read_labels",
+    "at_place",
     "matches",
     "score_discs",
 ]
@@ -191,11 +192,14 @@ def read_labels(path: str | os.PathLike) -> DiscLabels:
     return DiscLabels.from_json(data, f"discs file {path.name!r}")
 
 
+def at_place(found_xy, label: LabelledDisc) -> bool:
+    """True when a found centre lies at the labelled disc's place (MATCH_CENTRE_REL of its diameter)."""
+    return math.dist(found_xy, label.center_xy) <= MATCH_CENTRE_REL * label.diameter_px
+
+
 def matches(found_xy, found_diameter: float, label: LabelledDisc) -> bool:
-    """True when a found disc is the labelled one (centre and size, the module's tolerances)."""
-    distance = math.hypot(found_xy[0] - label.center_xy[0], found_xy[1] - label.center_xy[1])
-    return (distance <= MATCH_CENTRE_REL * label.diameter_px
-            and abs(found_diameter / label.diameter_px - 1.0) <= MATCH_DIAMETER_REL)
+    """True when a found disc is the labelled one: at its place, and its size within MATCH_DIAMETER_REL."""
+    return at_place(found_xy, label) and abs(found_diameter / label.diameter_px - 1.0) <= MATCH_DIAMETER_REL
 
 
 def _pairs(found: list[tuple[tuple[float, float], float]], labels: tuple[LabelledDisc, ...]) -> dict[int, int]:
@@ -290,8 +294,7 @@ def score_discs(labels: DiscLabels, found, used) -> DiscScore:
         elif any(math.hypot(xy[0] - j.center_xy[0], xy[1] - j.center_xy[1]) <= max(0.5 * j.size_px, 0.25 * diameter)
                  for j in labels.junk):
             what = "junk"
-        elif any(math.hypot(xy[0] - d.center_xy[0], xy[1] - d.center_xy[1]) <= MATCH_CENTRE_REL * d.diameter_px
-                 for d in labels.discs):
+        elif any(at_place(xy, d) for d in labels.discs):
             what = "mis-sized"
         elif labels.complete_at(xy):
             what = "unlabelled"

@@ -322,7 +322,8 @@ def _replace_with(path: Path, make) -> None:
     make(path)
 
 
-def _survey_database(path: Path, rows: int) -> None:
+def survey_database(path: Path, rows: int = 200) -> Path:
+    """A survey database of ``rows`` small rows at ``path`` (the corpus's and the tests' damaged copies start from it)."""
     from bokehfit.survey.store import SurveyStore, row_from_record
 
     with SurveyStore(path) as store:
@@ -331,6 +332,7 @@ def _survey_database(path: Path, rows: int) -> None:
             record = {"sha256": f"{i:064x}", "path": f"p{i}.jpg", "status": "no_discs", "reason": "none",
                       "thumbnail": rng.bytes(4000)}
             store.put(row_from_record(record, size_bytes=1, json_path=None, html_path=None))
+    return path
 
 
 def _round3_inputs(folder: Path, rgb: np.ndarray, good_jpeg: bytes, good_png: bytes, sweep: bool) -> None:
@@ -399,7 +401,7 @@ def _round3_inputs(folder: Path, rgb: np.ndarray, good_jpeg: bytes, good_png: by
     for name in ("whole.duckdb", "half.duckdb", "no_photos.duckdb", "other_columns.duckdb", "bad_wal.duckdb",
                  "bad_wal.duckdb.wal", "sqlite.duckdb"):
         (folder / name).unlink(missing_ok=True)
-    _survey_database(folder / "whole.duckdb", 200)
+    survey_database(folder / "whole.duckdb", 200)
     whole = (folder / "whole.duckdb").read_bytes()
     (folder / "whole.duckdb").unlink()
     (folder / "half.duckdb").write_bytes(whole[: len(whole) // 2])
@@ -409,7 +411,7 @@ def _round3_inputs(folder: Path, rgb: np.ndarray, good_jpeg: bytes, good_png: by
             connection.execute("INSERT INTO survey_meta VALUES ('schema_version', '1')")
             if other:
                 connection.execute("CREATE TABLE photos (sha256 VARCHAR, mine INTEGER)")
-    _survey_database(folder / "bad_wal.duckdb", 2)
+    survey_database(folder / "bad_wal.duckdb", 2)
     (folder / "bad_wal.duckdb.wal").write_bytes(np.random.default_rng(1).bytes(300))
     connection = sqlite3.connect(folder / "sqlite.duckdb")
     connection.execute("CREATE TABLE photos (x)")

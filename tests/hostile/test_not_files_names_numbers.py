@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hostile.corpus import survey_database
 from photo_factory import exif_for, write_jpeg, write_png
 
 import bokehfit
@@ -369,23 +370,11 @@ def test_tls_scheduler_that_does_not_speak_tls_is_refused():
         server.close()
 
 
-def _survey_database(path: Path, rows: int = 200) -> Path:
-    from bokehfit.survey.store import SurveyStore, row_from_record
-
-    with SurveyStore(path) as store:
-        rng = np.random.default_rng(0)
-        for i in range(rows):
-            record = {"sha256": f"{i:064x}", "path": f"p{i}.jpg", "status": "no_discs", "reason": "none",
-                      "thumbnail": rng.bytes(4000)}
-            store.put(row_from_record(record, size_bytes=1, json_path=None, html_path=None))
-    return path
-
-
 def _damaged(kind: str, tmp_path: Path) -> Path:
     import duckdb
 
     if kind == "cut_in_half":
-        whole = _survey_database(tmp_path / "whole.duckdb").read_bytes()
+        whole = survey_database(tmp_path / "whole.duckdb").read_bytes()
         (tmp_path / "s.duckdb").write_bytes(whole[: len(whole) // 2])
     elif kind in ("no_photos_table", "other_columns"):
         with duckdb.connect(str(tmp_path / "s.duckdb")) as connection:
@@ -394,7 +383,7 @@ def _damaged(kind: str, tmp_path: Path) -> Path:
             if kind == "other_columns":
                 connection.execute("CREATE TABLE photos (sha256 VARCHAR, mine INTEGER)")
     elif kind == "corrupt_wal":
-        _survey_database(tmp_path / "s.duckdb", rows=2)
+        survey_database(tmp_path / "s.duckdb", rows=2)
         (tmp_path / "s.duckdb.wal").write_bytes(np.random.default_rng(1).bytes(300))
     elif kind == "sqlite":
         with sqlite3.connect(tmp_path / "s.duckdb") as connection:
