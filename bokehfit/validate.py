@@ -3,9 +3,10 @@
 Every public entry point (``render_kernel``, ``bokehfit.scene.render``,
 ``make_lens``, the ``bokehfit.optics`` functions) and every command-line
 option of the same quantity goes through :func:`check` with an entry of
-``RANGES``, so the Python API and the command line accept the same values
-and refuse the rest with the same message, naming the parameter (the
-keyword, or the option on the command line) and the range::
+``RANGES`` (the options through the argparse types of
+:mod:`bokehfit.cli.arg_types`), so the Python API and the command line accept
+the same values and refuse the rest with the same message, naming the
+parameter (the keyword, or the option on the command line) and the range::
 
     --focal-length-mm must be a finite number in [1, 10000] mm (got 1e-300)
 
@@ -25,7 +26,6 @@ bokehfit.errors.InputError: --spp must be an integer in [1, 65536] (got 0)
 
 from __future__ import annotations
 
-import argparse
 import math
 import numbers
 from dataclasses import dataclass
@@ -34,7 +34,7 @@ import numpy as np
 
 from bokehfit.errors import InputError
 
-__all__ = ["Range", "RANGES", "check", "arg_type", "cli_value", "interval", "pair_arg", "shape_arg"]
+__all__ = ["Range", "RANGES", "check"]
 
 
 @dataclass(frozen=True)
@@ -136,7 +136,7 @@ def check(quantity: str, value, *, name: str | None = None, high: float | None =
         if not isinstance(value, (int, np.integer)) or not rule.contains(float(value)):
             raise InputError(expected)
         return int(value)
-    if not isinstance(value, numbers.Real):  # int, float, NumPy scalars; not text (cli_value parses that)
+    if not isinstance(value, numbers.Real):  # int, float, NumPy scalars; not text (bokehfit.cli.arg_types parses that)
         raise InputError(expected)
     try:
         number = float(value)
@@ -145,77 +145,3 @@ def check(quantity: str, value, *, name: str | None = None, high: float | None =
     if not rule.contains(number):
         raise InputError(expected)
     return number
-
-
-def cli_value(quantity: str, text: str, option: str):
-    """Parse one command-line value and :func:`check` it under the option's name."""
-    rule = RANGES[quantity]
-    stripped = text.strip()
-    try:
-        value = int(stripped, 10) if rule.integer else float(stripped)
-    except ValueError:
-        raise InputError(f"{option} must be {rule.describe()} (got {text!r})") from None
-    return check(quantity, value, name=option)
-
-
-def arg_type(quantity: str, option: str):
-    """An argparse ``type=`` for ``option``: the same check as the Python API.
-
-    The error is an ``argparse.ArgumentTypeError``, so argparse prints it
-    (``argument --spp: must be an integer in [1, 65536] (got 0)``) and exits
-    with code 2, instead of its generic ``invalid value``.
-    """
-
-    def parse(text: str):
-        try:
-            return cli_value(quantity, text, option)
-        except InputError as error:
-            # argparse names the option itself ("argument --spp: ...").
-            raise argparse.ArgumentTypeError(str(error).removeprefix(f"{option} ")) from None
-
-    parse.__name__ = option.lstrip("-").replace("-", "_")
-    return parse
-
-
-def shape_arg(option: str):
-    """An argparse ``type=`` for a shape option: ``bokehfit.apertures.parse_shape`` checks the text.
-
-    The text is returned as given (``make_aperture`` reads it with the same parser).
-    """
-
-    def parse(text: str) -> str:
-        from bokehfit.apertures import parse_shape
-
-        try:
-            parse_shape(text)
-        except InputError as error:
-            raise argparse.ArgumentTypeError(str(error).removeprefix("shape ")) from None
-        return text
-
-    parse.__name__ = option.lstrip("-").replace("-", "_")
-    return parse
-
-
-def interval(quantity: str) -> str:
-    """The accepted interval of ``quantity`` for a help text, e.g. ``[1, 65536]``."""
-    return RANGES[quantity].describe().split(" in ", 1)[1]
-
-
-def pair_arg(option: str, quantities: tuple[str, str], metavar: str):
-    """An argparse ``type=`` for ``option``: two comma-separated numbers, each checked against ``RANGES``.
-
-    ``--vignetting 1.2,0.8`` → (1.2, 0.8); the error names the option and the
-    expected form (``argument --vignetting: must be RADIUS,SHIFT ...``).
-    """
-
-    def parse(text: str) -> tuple[float, float]:
-        parts = text.split(",")
-        if len(parts) != 2:
-            raise argparse.ArgumentTypeError(f"must be {metavar}, two numbers separated by a comma (got {text!r})")
-        try:
-            return tuple(cli_value(quantity, part, option) for quantity, part in zip(quantities, parts))
-        except InputError as error:
-            raise argparse.ArgumentTypeError(str(error).removeprefix(f"{option} ")) from None
-
-    parse.__name__ = option.lstrip("-").replace("-", "_")
-    return parse

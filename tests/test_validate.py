@@ -18,11 +18,12 @@ import pytest
 
 from bokehfit.apertures import make_aperture, parse_shape
 from bokehfit.cli import build_parser
+from bokehfit.cli.arg_types import arg_type
 from bokehfit.errors import InputError
 from bokehfit.kernels import render_kernel
 from bokehfit.optics import coc_mm, fstop_from_coc, pixel_pitch_mm
 from bokehfit.scene import make_lens, make_settings, parse_depths, tone_map_srgb8
-from bokehfit.validate import RANGES, arg_type, check
+from bokehfit.validate import RANGES, check
 
 REPO = Path(__file__).resolve().parents[1]
 

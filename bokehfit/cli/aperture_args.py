@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 
 from bokehfit.apertures.mask import MAX_MASK_SIDE
-from bokehfit.validate import arg_type, interval, pair_arg
+from bokehfit.cli.arg_types import arg_type, interval, pair_arg
 
 __all__ = ["add_feature_arguments"]
 

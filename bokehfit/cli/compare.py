@@ -14,13 +14,13 @@ import math
 import sys
 from pathlib import Path
 
+from bokehfit.cli.arg_types import arg_type
 from bokehfit.compare import Comparison, compare_photo
 from bokehfit.discs import COMPARE_MIN_DIAMETER_PX, DEFAULT_MAX_DIAMETER_PX, DEFAULT_MIN_DIAMETER_PX
 from bokehfit.errors import InputError, NoResultError, check_positive
 from bokehfit.fit import FOCUS_SIDES
 from bokehfit.optics import LENS_MODELS, SIZE_CONVENTIONS
 from bokehfit.outputs import check_output_path, encode_text, make_folder, write_bytes_atomic, write_json
-from bokehfit.validate import arg_type
 
 __all__ = ["add_parser", "run", "summary"]
 

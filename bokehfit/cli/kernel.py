@@ -12,7 +12,7 @@ from bokehfit.kernels.accuracy import MIN_TOLERANCE
 from bokehfit.errors import InputError
 from bokehfit.outputs import KERNEL_FORMATS, check_output_path, write_exr, write_kernel_image, write_png
 from bokehfit.cli.aperture_args import add_feature_arguments
-from bokehfit.validate import arg_type, interval, pair_arg, shape_arg
+from bokehfit.cli.arg_types import arg_type, interval, pair_arg, shape_arg
 
 __all__ = ["add_parser", "run"]
 

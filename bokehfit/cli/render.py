@@ -29,7 +29,7 @@ from bokehfit.scene import (
 )
 from bokehfit.scene.renderer import QUICK_WORK, estimate_render_s
 from bokehfit.cli.aperture_args import add_feature_arguments
-from bokehfit.validate import arg_type, interval, shape_arg
+from bokehfit.cli.arg_types import arg_type, interval, shape_arg
 
 __all__ = ["add_parser", "run", "parse_size", "check_render_memory", "estimate_write_s", "RENDER_BYTES_PER_PIXEL"]
 

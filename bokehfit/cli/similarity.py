@@ -7,7 +7,7 @@ import argparse
 from bokehfit import __version__
 from bokehfit.apertures import SHAPES, Aperture, Vignetting, make_aperture
 from bokehfit.cli.aperture_args import add_feature_arguments
-from bokehfit.validate import pair_arg
+from bokehfit.cli.arg_types import pair_arg
 from bokehfit.errors import InputError
 from bokehfit.metrics import METRICS, angle_error, aperture_outline, best_rotation_deg, compare_outlines
 from bokehfit.metrics.outlines import DEFAULT_POINTS, densify

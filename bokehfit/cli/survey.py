@@ -19,10 +19,10 @@ import math
 import os
 import signal
 
+from bokehfit.cli.arg_types import arg_type
 from bokehfit.errors import InputError, check_positive
 from bokehfit.fit import FOCUS_SIDES
 from bokehfit.optics import LENS_MODELS, SIZE_CONVENTIONS
-from bokehfit.validate import arg_type
 
 __all__ = ["add_parser", "run", "DEFAULT_TIMEOUT_S"]
 
