@@ -27,12 +27,16 @@ make_aperture(shape, angle_deg, ...) -> Aperture
 compute_kernel(aperture, diameter_px, ...) -> Kernel
     The point-light defocus kernel of an aperture (:mod:`bokehfit.kernels`).
 survey(paths, db, ...) -> pyarrow.Table
-    ``compare`` on a photo library into a DuckDB database (:mod:`bokehfit.survey`).
+    ``compare`` on a photo library into a DuckDB database (defined here; the work is in :mod:`bokehfit.surveys`).
 
 The command line: ``bokehfit --help`` (``compare``, ``discs``, ``kernel``, ``similarity``,
 ``render``, ``view``, ``bench``, ``survey``).
 """
 
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable
 from importlib.metadata import PackageNotFoundError, version
 
 try:
@@ -55,14 +59,92 @@ __all__ = ["__version__", "survey", *_LAZY]
 
 
 def __getattr__(name):
-    """``bokehfit.survey(...)``, ``bokehfit.compare_photo(...)``, ... without importing them with bokehfit."""
+    """``bokehfit.compare_photo(...)``, ``bokehfit.load_photo(...)``, ... without importing them with bokehfit."""
     import importlib
 
-    if name == "survey":
-        return importlib.import_module("bokehfit.survey")
     if name in _LAZY:
         return getattr(importlib.import_module(_LAZY[name]), name)
     raise AttributeError(f"module 'bokehfit' has no attribute {name!r}")
+
+
+def survey(
+    paths: Iterable[str | os.PathLike] = (),
+    db: str | os.PathLike = "survey.duckdb",
+    *,
+    files_from: str | os.PathLike | None = None,
+    jobs: int | None = None,
+    scheduler=None,
+    timeout_s: float | None = None,
+    html: bool = True,
+    retry_failed: bool = False,
+    compare_options: dict | None = None,
+    report: str | os.PathLike | None = None,
+    parquet: str | os.PathLike | None = None,
+    progress: bool | None = None,
+    adapter=None,
+    command_line: str | None = None,
+):
+    """Survey photos into a database and return the whole table.
+
+    Parameters
+    ----------
+    paths : iterable of str or path-like
+        Files, folders (walked) and glob patterns (:func:`bokehfit.surveys.files.find_photos`).
+    db : str or path-like
+        The DuckDB file (``.duckdb`` or ``.db``), created if missing; the
+        per-photo compare JSON and HTML go to ``NAME_reports/`` beside it.
+    files_from : path-like, optional
+        A text file listing more photos, one a line.
+    jobs : int, optional
+        Worker processes on this machine (default: the usable CPU cores).
+        Ignored with ``scheduler``.
+    scheduler : str or distributed.Client, optional
+        A Dask scheduler's address (``tcp://host:8786``) or a connected client:
+        the photos run on that cluster instead.
+    timeout_s : float, optional
+        Per-photo limit; a photo past it is a ``timeout`` row. Enforced in local
+        worker processes (POSIX); Dask has no per-task limit.
+    html : bool
+        Write each photo's HTML report beside its JSON.
+    retry_failed : bool
+        Run again the photos stored as ``unreadable``, ``error`` or ``timeout``.
+    compare_options : dict, optional
+        Keywords of :func:`bokehfit.compare.compare_photo` (``shapes``,
+        ``focus_side``, ``sensor_width_mm``, ...), the same for every photo.
+    report, parquet : path-like, optional
+        Also write the fingerprint page (:func:`bokehfit.surveys.write_report`) and the
+        Parquet export (:func:`bokehfit.surveys.export_parquet`).
+    progress : bool, optional
+        Show a progress bar with rate and ETA (default: when stderr is a terminal).
+    adapter : bokehfit.gpu.AdapterChoice, optional
+        The GPU the workers use.
+
+    Returns
+    -------
+    pyarrow.Table
+        Every row of the database (not only this run's), ordered by path, without the
+        bulky ``result`` (compare's JSON) and ``thumbnail`` columns.
+
+    Examples
+    --------
+    >>> import bokehfit
+    >>> table = bokehfit.survey(["photos/"], "lens.duckdb", jobs=2)  # doctest: +SKIP
+    >>> table.group_by(["lens", "exif_fnumber"]).aggregate([("fstop", "mean")])  # doctest: +SKIP
+    """
+    from bokehfit.surveys import export_parquet, prepare_survey, write_report
+    from bokehfit.surveys.run import run_survey
+    from bokehfit.surveys.store import SurveyStore
+
+    prepared = prepare_survey(paths, files_from=files_from, jobs=jobs, timeout_s=timeout_s, compare_options=compare_options)
+    with SurveyStore(db) as store:
+        run_survey(store=store, scheduler=scheduler, html=html, retry_failed=retry_failed, progress=progress,
+                   adapter=adapter, command_line=command_line or "", **prepared)
+        table = store.table()
+    if report is not None:
+        write_report(db, report, command_line=command_line or "")
+    if parquet is not None:
+        export_parquet(db, parquet)
+    return table
 
 
 def __dir__():

@@ -72,7 +72,7 @@ def test_a_value_whose_uncertainty_exceeds_it_is_not_measurable(circle):
     for value, uncertainty in re.findall(r"(\d+\.?\d*) ± (\d+\.?\d*)", shown):
         assert float(uncertainty) <= float(value), f"{value} ± {uncertainty} shown as a result"
 
-    from bokehfit.survey.store import row_from_record
+    from bokehfit.surveys.store import row_from_record
 
     row = row_from_record({"sha256": "x", "path": "p.jpg", "status": loose.status, "document": loose.to_json("")},
                           size_bytes=None, json_path=None, html_path=None)

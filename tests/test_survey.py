@@ -28,7 +28,7 @@ from PIL import Image
 
 import bokehfit
 from bokehfit.apertures import make_aperture
-from bokehfit.survey.files import find_photos
+from bokehfit.surveys.files import find_photos
 from bokehfit.synthetic import SyntheticDisc, encode_srgb8, render_discs
 
 WIDTH_PX, HEIGHT_PX = 200, 140
@@ -210,7 +210,7 @@ def test_fstop_bounds_are_stored_and_shown_as_bounds(surveyed):
     assert fitted and all(row["fstop_bound"] == "upper" for row in fitted)
     page = _Page()
     page.feed((surveyed["folder"] / "lens.html").read_text())
-    from bokehfit.survey.report import SUMMARISED
+    from bokehfit.surveys.report import SUMMARISED
 
     column = 4 + [name for name, _, _ in SUMMARISED].index("fstop")  # after f-number, photos, statuses, shape
     shown = {cells[0]: cells[column] for cells in page.group_rows}
@@ -218,7 +218,7 @@ def test_fstop_bounds_are_stored_and_shown_as_bounds(surveyed):
 
 
 def test_a_group_of_one_photo_shows_its_value_not_a_spread(tmp_path):
-    from bokehfit.survey.report import build_report
+    from bokehfit.surveys.report import build_report
 
     row = {"sha256": "a" * 64, "path": "one.jpg", "status": "fitted", "camera": CAMERA, "lens": LENS, "exif_fnumber": 2.0,
            "shape": "circle", "blades": None, "fstop": 2.0, "fstop_uncertainty": 0.0, "fstop_bound": "upper",
@@ -433,7 +433,7 @@ class _PoolThatBreaks:
         import concurrent.futures
         from concurrent.futures.process import BrokenProcessPool
 
-        from bokehfit.survey.run import _failure
+        from bokehfit.surveys.run import _failure
 
         n, self.submitted = self.submitted, self.submitted + 1
         if self.pools == 1 and n >= 2:
@@ -461,8 +461,8 @@ class _PoolThatBreaks:
 
 
 def test_a_pool_broken_between_a_result_and_the_next_submit_is_restarted(tmp_path, monkeypatch):
-    from bokehfit.survey import run as survey_run
-    from bokehfit.survey.store import SurveyStore
+    from bokehfit.surveys import run as survey_run
+    from bokehfit.surveys.store import SurveyStore
 
     photos = []
     for k in range(4):

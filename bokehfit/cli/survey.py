@@ -121,9 +121,9 @@ def _stop_at_once(signum, frame):
 
 def run(args: argparse.Namespace):
     from bokehfit.outputs import check_output_path
-    from bokehfit.survey import export_parquet, prepare_survey, write_report
-    from bokehfit.survey.run import run_survey
-    from bokehfit.survey.store import SurveyStore
+    from bokehfit.surveys import export_parquet, prepare_survey, write_report
+    from bokehfit.surveys.run import run_survey
+    from bokehfit.surveys.store import SurveyStore
 
     if not (args.paths or args.files_from or args.report or args.parquet):
         raise InputError("give PATHs (or --files-from) to survey, or --report/--parquet to write from the database")
@@ -136,7 +136,7 @@ def run(args: argparse.Namespace):
             except InputError as error:
                 raise InputError(f"{option}: {error}") from None
     if args.scheduler:
-        from bokehfit.survey.scheduler import check_scheduler
+        from bokehfit.surveys.scheduler import check_scheduler
 
         check_scheduler(args.scheduler)  # before any photo is hashed or the database is made
     run_ = None

@@ -324,7 +324,7 @@ def _replace_with(path: Path, make) -> None:
 
 def survey_database(path: Path, rows: int = 200) -> Path:
     """A survey database of ``rows`` small rows at ``path`` (the corpus's and the tests' damaged copies start from it)."""
-    from bokehfit.survey.store import SurveyStore, row_from_record
+    from bokehfit.surveys.store import SurveyStore, row_from_record
 
     with SurveyStore(path) as store:
         rng = np.random.default_rng(0)

@@ -126,7 +126,7 @@ def test_glob_through_folder_link_loops_ends_and_finds_each_photo_once(tmp_path)
         (library / name).write_bytes(b"\xff\xd8")
     os.symlink("..", library / "a" / "b" / "up")
     os.symlink("../..", library / "a" / "b" / "top")
-    code = ("from bokehfit.survey.files import find_photos; import sys; "
+    code = ("from bokehfit.surveys.files import find_photos; import sys; "
             f"print(sorted(p.name for p in find_photos([{str(library / '**' / '*.jpg')!r}])))")
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=HANG_S,
                           env=dict(os.environ, PYTHONPATH=str(Path(bokehfit.__file__).resolve().parents[1])))
@@ -136,7 +136,7 @@ def test_glob_through_folder_link_loops_ends_and_finds_each_photo_once(tmp_path)
 
 @pytest.mark.parametrize("kind", ["fifo", "dev_zero", "too_large"])
 def test_files_from_that_is_not_a_bounded_regular_file_is_refused(tmp_path, kind, monkeypatch):
-    from bokehfit.survey import files
+    from bokehfit.surveys import files
 
     source = tmp_path / "list.txt"
     if kind == "fifo":
@@ -170,7 +170,7 @@ def test_db_that_is_a_fifo_is_refused(tmp_path):
 
 
 def test_content_hash_refuses_what_is_not_a_regular_file(tmp_path):
-    from bokehfit.survey.files import content_hash
+    from bokehfit.surveys.files import content_hash
 
     with pytest.raises(OSError, match="not a regular file"):
         content_hash(tmp_path)
@@ -326,7 +326,7 @@ class _Server:
 
 @pytest.mark.parametrize("answer", [None, b"\xff" * 8 + b"garbage" * 100, b"HTTP/1.1 400 Bad Request\r\n\r\n"])
 def test_scheduler_that_is_not_dask_is_refused_within_the_connect_timeout(answer):
-    from bokehfit.survey.scheduler import check_scheduler
+    from bokehfit.surveys.scheduler import check_scheduler
 
     server = _Server(answer)
     try:
@@ -353,14 +353,14 @@ def test_scheduler_that_never_answers_is_one_line_on_the_command_line(tmp_path):
 @pytest.mark.parametrize("address,words", [("ucx://127.0.0.1:1", "not supported"), ("tls://127.0.0.1:1", "can't connect"),
                                            ("nonsense", "tcp://HOST:PORT")])
 def test_scheduler_schemes_dask_cannot_use_here_are_one_line(address, words):
-    from bokehfit.survey.scheduler import check_scheduler
+    from bokehfit.surveys.scheduler import check_scheduler
 
     with pytest.raises(InputError, match=words):
         check_scheduler(address, timeout_s=2.0)
 
 
 def test_tls_scheduler_that_does_not_speak_tls_is_refused():
-    from bokehfit.survey.scheduler import check_scheduler
+    from bokehfit.surveys.scheduler import check_scheduler
 
     server = _Server(b"\x00" * 64)
     try:
@@ -409,7 +409,7 @@ def test_damaged_or_foreign_database_is_one_line(tmp_path, kind, words):
 
 
 def test_connections_load_and_install_no_extension():
-    from bokehfit.survey.store import CONNECTION_CONFIG
+    from bokehfit.surveys.store import CONNECTION_CONFIG
 
     assert CONNECTION_CONFIG["autoload_known_extensions"] is False
     assert CONNECTION_CONFIG["autoinstall_known_extensions"] is False
@@ -440,7 +440,7 @@ def test_names_that_are_not_utf8_reach_every_output(tmp_path):
     assert code == 0 and "wrote" in stdout, stderr
     # the HTML page and the survey's rows: the name's bad bytes become U+FFFD
     from bokehfit.outputs import encode_text
-    from bokehfit.survey.store import row_from_record
+    from bokehfit.surveys.store import row_from_record
 
     assert encode_text(os.fsdecode(b"<p>photo\xff.png</p>")) == "<p>photo\ufffd.png</p>".encode()
     row = row_from_record({"sha256": "0" * 64, "path": os.fsdecode(photo), "status": "unreadable"},

@@ -1,16 +1,16 @@
 """Survey a photo library: compare on every photo, each result kept in a DuckDB database.
 
-``bokehfit.survey(paths, db="survey.duckdb")`` (this package is callable) runs
-:func:`bokehfit.compare.compare_photo` on every photo that ``paths`` name (folders
-walked, glob patterns, files), in worker processes on this machine or on a
+The work behind :func:`bokehfit.survey` (``bokehfit.survey(paths, db="survey.duckdb")``),
+which runs :func:`bokehfit.compare.compare_photo` on every photo that ``paths`` name
+(folders walked, glob patterns, files), in worker processes on this machine or on a
 Dask cluster, and returns the database's table as a ``pyarrow.Table``. Each
 photo is one row keyed by the SHA-256 of its bytes, committed as its result
 arrives: a rerun skips what is done, an interrupted survey resumes, and a photo
 that fails is a row with its status and reason (:data:`STATUSES`).
 
-Modules: :mod:`~bokehfit.survey.files` (which files), :mod:`~bokehfit.survey.work`
-(one photo, in a worker), :mod:`~bokehfit.survey.store` (the database),
-:mod:`~bokehfit.survey.run` (the engines and the loop), :mod:`~bokehfit.survey.report`
+Modules: :mod:`~bokehfit.surveys.files` (which files), :mod:`~bokehfit.surveys.work`
+(one photo, in a worker), :mod:`~bokehfit.surveys.store` (the database),
+:mod:`~bokehfit.surveys.run` (the engines and the loop), :mod:`~bokehfit.surveys.report`
 (the lens fingerprint page).
 """
 
@@ -18,17 +18,13 @@ from __future__ import annotations
 
 import inspect
 import os
-import sys
-import types
-from collections.abc import Iterable
 from pathlib import Path
 
 from bokehfit.errors import InputError, check_positive
-from bokehfit.survey.store import SURVEY_SCHEMA_VERSION, SurveyStore, reports_folder
-from bokehfit.survey.work import FAILURE_STATUSES, STATUSES
+from bokehfit.surveys.store import SURVEY_SCHEMA_VERSION, SurveyStore, reports_folder
+from bokehfit.surveys.work import FAILURE_STATUSES, STATUSES
 
 __all__ = [
-    "survey",
     "survey_table",
     "write_report",
     "export_parquet",
@@ -77,91 +73,13 @@ def check_compare_options(options: dict | None) -> dict:
     return options
 
 
-def survey(
-    paths: Iterable[str | os.PathLike] = (),
-    db: str | os.PathLike = "survey.duckdb",
-    *,
-    files_from: str | os.PathLike | None = None,
-    jobs: int | None = None,
-    scheduler=None,
-    timeout_s: float | None = None,
-    html: bool = True,
-    retry_failed: bool = False,
-    compare_options: dict | None = None,
-    report: str | os.PathLike | None = None,
-    parquet: str | os.PathLike | None = None,
-    progress: bool | None = None,
-    adapter=None,
-    command_line: str | None = None,
-):
-    """Survey photos into a database and return the whole table.
-
-    Parameters
-    ----------
-    paths : iterable of str or path-like
-        Files, folders (walked) and glob patterns (:func:`bokehfit.survey.files.find_photos`).
-    db : str or path-like
-        The DuckDB file (``.duckdb`` or ``.db``), created if missing; the
-        per-photo compare JSON and HTML go to ``NAME_reports/`` beside it.
-    files_from : path-like, optional
-        A text file listing more photos, one a line.
-    jobs : int, optional
-        Worker processes on this machine (default: the usable CPU cores).
-        Ignored with ``scheduler``.
-    scheduler : str or distributed.Client, optional
-        A Dask scheduler's address (``tcp://host:8786``) or a connected client:
-        the photos run on that cluster instead.
-    timeout_s : float, optional
-        Per-photo limit; a photo past it is a ``timeout`` row. Enforced in local
-        worker processes (POSIX); Dask has no per-task limit.
-    html : bool
-        Write each photo's HTML report beside its JSON.
-    retry_failed : bool
-        Run again the photos stored as ``unreadable``, ``error`` or ``timeout``.
-    compare_options : dict, optional
-        Keywords of :func:`bokehfit.compare.compare_photo` (``shapes``,
-        ``focus_side``, ``sensor_width_mm``, ...), the same for every photo.
-    report, parquet : path-like, optional
-        Also write the fingerprint page (:func:`write_report`) and the Parquet
-        export (:func:`export_parquet`).
-    progress : bool, optional
-        Show a progress bar with rate and ETA (default: when stderr is a terminal).
-    adapter : bokehfit.gpu.AdapterChoice, optional
-        The GPU the workers use.
-
-    Returns
-    -------
-    pyarrow.Table
-        Every row of the database (not only this run's), ordered by path, without the
-        bulky ``result`` (compare's JSON) and ``thumbnail`` columns.
-
-    Examples
-    --------
-    >>> import bokehfit.survey
-    >>> table = bokehfit.survey(["photos/"], "lens.duckdb", jobs=2)  # doctest: +SKIP
-    >>> table.group_by(["lens", "exif_fnumber"]).aggregate([("fstop", "mean")])  # doctest: +SKIP
-    """
-    from bokehfit.survey.run import run_survey
-
-    prepared = prepare_survey(paths, files_from=files_from, jobs=jobs, timeout_s=timeout_s, compare_options=compare_options)
-    with SurveyStore(db) as store:
-        run_survey(store=store, scheduler=scheduler, html=html, retry_failed=retry_failed, progress=progress,
-                   adapter=adapter, command_line=command_line or "", **prepared)
-        table = store.table()
-    if report is not None:
-        write_report(db, report, command_line=command_line or "")
-    if parquet is not None:
-        export_parquet(db, parquet)
-    return table
-
-
 def prepare_survey(paths=(), *, files_from=None, jobs=None, timeout_s=None, compare_options=None) -> dict:
     """Check a survey's arguments and find its photos, before any database is opened or created.
 
-    Returns the keywords of :func:`bokehfit.survey.run.run_survey` that depend on them:
+    Returns the keywords of :func:`bokehfit.surveys.run.run_survey` that depend on them:
     ``photos``, ``jobs``, ``timeout_s`` and ``options``. Raises ``InputError`` naming a bad one.
     """
-    from bokehfit.survey.files import find_photos, read_file_list
+    from bokehfit.surveys.files import find_photos, read_file_list
 
     if jobs is None:
         jobs = default_jobs()
@@ -175,15 +93,15 @@ def prepare_survey(paths=(), *, files_from=None, jobs=None, timeout_s=None, comp
 
 
 def survey_table(db: str | os.PathLike):
-    """The database's table (as :func:`survey` returns it), read without running anything."""
+    """The database's table (as :func:`bokehfit.survey` returns it), read without running anything."""
     with SurveyStore(db, read_only=True) as store:
         return store.table()
 
 
 def write_report(db: str | os.PathLike, report: str | os.PathLike, *, command_line: str = "") -> Path:
-    """Write the lens fingerprint page (:mod:`bokehfit.survey.report`) of a survey database, atomically."""
+    """Write the lens fingerprint page (:mod:`bokehfit.surveys.report`) of a survey database, atomically."""
     from bokehfit.outputs import check_output_path, encode_text, write_bytes_atomic
-    from bokehfit.survey.report import build_report
+    from bokehfit.surveys.report import build_report
 
     path = check_output_path(report, (".html",), inputs=[db])
     with SurveyStore(db, read_only=True) as store:
@@ -209,13 +127,3 @@ def export_parquet(db: str | os.PathLike, parquet: str | os.PathLike) -> Path:
     table = table.replace_schema_metadata({**(table.schema.metadata or {}), **metadata})
     write_atomic(path, lambda temporary: pyarrow.parquet.write_table(table, temporary))
     return path
-
-
-class _CallableModule(types.ModuleType):
-    """``bokehfit.survey`` is this package and, called, its main function :func:`survey`."""
-
-    def __call__(self, *args, **kwargs):
-        return survey(*args, **kwargs)
-
-
-sys.modules[__name__].__class__ = _CallableModule

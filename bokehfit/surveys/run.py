@@ -31,10 +31,10 @@ from pathlib import Path
 
 from bokehfit.errors import InputError
 from bokehfit.outputs import encode_text, write_bytes_atomic, write_json
-from bokehfit.survey.files import content_hash
-from bokehfit.survey.scheduler import check_scheduler
-from bokehfit.survey.store import SurveyStore, reports_folder, row_from_record
-from bokehfit.survey.work import FAILURE_STATUSES, PhotoTask, init_worker, survey_photo
+from bokehfit.surveys.files import content_hash
+from bokehfit.surveys.scheduler import check_scheduler
+from bokehfit.surveys.store import SurveyStore, reports_folder, row_from_record
+from bokehfit.surveys.work import FAILURE_STATUSES, PhotoTask, init_worker, survey_photo
 
 __all__ = ["SurveyRun", "run_survey", "IN_FLIGHT_PER_WORKER", "MAX_WORKER_CRASHES"]
 
@@ -306,7 +306,7 @@ def run_survey(
     connect_timeout_s: float = 30.0,
     on_result: Callable[[dict], None] | None = None,
 ) -> SurveyRun:
-    """Survey ``photos`` into ``store``; see :func:`bokehfit.survey.survey` for the parameters.
+    """Survey ``photos`` into ``store``; see :func:`bokehfit.survey` for the parameters.
 
     The first Ctrl-C (SIGINT, in the main thread) stops handing out photos, stores
     the results already back, stops the local workers at once (the photos in

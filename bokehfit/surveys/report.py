@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from bokehfit import __version__
-from bokehfit.survey.work import STATUSES
+from bokehfit.surveys.work import STATUSES
 
 __all__ = ["group_rows", "shape_label", "fingerprint_sentence", "build_report", "FITTED_STATUSES", "THUMBNAILS_PER_GROUP", "FSTOP_TICKS"]
 
@@ -246,7 +246,7 @@ def build_report(rows: list[dict], thumbnails: dict[str, bytes], *, report_path:
     Parameters
     ----------
     rows : list of dict
-        The ``photos`` table's rows (:meth:`bokehfit.survey.store.SurveyStore.table`, as Python dicts).
+        The ``photos`` table's rows (:meth:`bokehfit.surveys.store.SurveyStore.table`, as Python dicts).
     thumbnails : dict
         sha256 → JPEG bytes.
     report_path, db_path : path-like

@@ -154,7 +154,7 @@ def _part(value, key):
 
 
 def row_from_record(record: dict, *, size_bytes: int | None, json_path: str | None, html_path: str | None) -> dict:
-    """A ``photos`` row (column name → value) from a worker's record (:func:`bokehfit.survey.work.survey_photo`)."""
+    """A ``photos`` row (column name → value) from a worker's record (:func:`bokehfit.surveys.work.survey_photo`)."""
     document = record.get("document") or {}
     source = document.get("input") or {}
     exif = source.get("exif") or {}
