@@ -38,6 +38,7 @@ from scipy.spatial import cKDTree
 from bokehfit.discs.candidates import LARGE_DISC_PX, Candidate, find_candidates
 from bokehfit.discs.circles import find_circles
 from bokehfit.discs.measure import RESOLVABLE_PX, Measurement, measure_candidate, split_cluster
+from bokehfit.discs.rays import measure_rays
 from bokehfit.errors import InputError, check_finite
 
 __all__ = [
@@ -453,6 +454,7 @@ def find_discs(
             rejections.append(Rejection(where, size, reason))
     found += _circle_discs(luminance, clipped, measurements, min_diameter_px, min(max_diameter_px, search_max_px),
                            rejected, rejections)
+    measurements = _by_own_steps(luminance, clipped, measurements, min_diameter_px)
     return _discs_of(measurements, found, rejected, start, notes, rejections, max_discs)
 
 
@@ -520,6 +522,7 @@ def measure_discs_at(
             rejections.append(Rejection(xy, diameter, m))
         else:
             measurements.append(replace(m, reason=None))
+    measurements = [replace(m, reason=None) for m in _by_own_steps(luminance, clipped, measurements, 1.0)]
     return _discs_of(measurements, len(places), rejected, start, [], rejections, None)
 
 
@@ -531,17 +534,56 @@ def _measure_place(luminance, clipped, xy, diameter: float, min_diameter_px: flo
     height, width = luminance.shape
     if not (0 <= xy[0] < width and 0 <= xy[1] < height):
         return "outside the photo"
+    m = _contour_at_place(luminance, clipped, xy, diameter, min_diameter_px)
+    if isinstance(m, Measurement) and m.reason is None:
+        return m
+    # Where one level does not outline it (a faint disc over haze and its neighbours' light, discs
+    # that overlap), the disc's own edge along rays from the place may.
+    stepped = measure_rays(luminance, clipped, xy, diameter, MIN_NOISE, min_diameter_px)
+    if isinstance(stepped, Measurement) and _near_place(stepped, xy, diameter) and \
+            (stepped.reason is None or isinstance(m, str)):
+        return stepped
+    return m
+
+
+def _near_place(m: Measurement, xy, diameter: float) -> bool:
+    """The measurement is of a disc of about ``diameter`` at ``xy`` (within twice or half the size,
+    its centre within half the diameter)."""
+    return abs(math.log(m.diameter_px / diameter)) <= math.log(2.0) and \
+        math.hypot(m.center_xy[0] - xy[0], m.center_xy[1] - xy[1]) <= 0.5 * diameter
+
+
+def _contour_at_place(luminance, clipped, xy, diameter: float, min_diameter_px: float) -> Measurement | str:
+    """The contour measurement at a place (:func:`bokehfit.discs.measure.measure_candidate`), the part
+    of its cluster closest to the place, or a reason."""
     m = measure_candidate(luminance, clipped, xy, diameter, 0.5 * diameter, MIN_NOISE, min_diameter_px)
     if isinstance(m, str):
         return m
     parts = [m] + (split_cluster(m) if m.overlaps and m.diameter_px >= 2.0 * RESOLVABLE_PX else [])
     m = min(parts, key=lambda p: math.hypot(p.center_xy[0] - xy[0], p.center_xy[1] - xy[1]) / diameter
             + abs(math.log(p.diameter_px / diameter)))
-    if abs(math.log(m.diameter_px / diameter)) > math.log(2.0) or \
-            math.hypot(m.center_xy[0] - xy[0], m.center_xy[1] - xy[1]) > 0.5 * diameter:
+    if not _near_place(m, xy, diameter):
         return (f"the outline measured there ({m.diameter_px:.0f} px at {m.center_xy[0]:.0f},"
                 f" {m.center_xy[1]:.0f}) is not a disc of about {diameter:.0f} px")
     return m
+
+
+def _by_own_steps(luminance, clipped, measurements: list[Measurement], min_diameter_px: float) -> list[Measurement]:
+    """The measurements, those whose contour runs into other discs' light over more than MIN_FIT_SEEN
+    of it measured again by their own step along rays (:func:`bokehfit.discs.rays.measure_rays`), where
+    that finds the same disc and sees more of its edge (light adds: the step of a disc's edge is its
+    own inside a neighbour's light, where a contour through the sum of both is neither's)."""
+    measurements = _distinct_measurements(measurements)
+    own, _ = _own_outlines(measurements)
+    again = list(measurements)
+    for i, (m, reliable) in enumerate(zip(measurements, own)):
+        if m.own_step or not len(reliable) or reliable.mean() >= MIN_FIT_SEEN or m.diameter_px < RESOLVABLE_PX:
+            continue
+        stepped = measure_rays(luminance, clipped, m.center_xy, m.diameter_px, MIN_NOISE, min_diameter_px)
+        if isinstance(stepped, Measurement) and stepped.reason is None and _near_place(stepped, m.center_xy, m.diameter_px) \
+                and _same_size(stepped.diameter_px, m.diameter_px) and stepped.outline_reliable.mean() > reliable.mean():
+            again[i] = stepped
+    return again
 
 
 def _discs_of(measurements, found, rejected, start, notes, rejections, max_discs) -> DiscSearch:
@@ -591,7 +633,9 @@ def _own_outlines(measurements: list[Measurement]) -> tuple[list[np.ndarray], li
     """Per disc, which outline points are its own and reliable, and its cluster id.
 
     A point of one disc's outline that lies inside another disc's outline (or
-    within OVERLAP_MARGIN_PX of it) is the overlap's edge, not the disc's. Discs
+    within OVERLAP_MARGIN_PX of it) is the overlap's edge, not the disc's, unless
+    the outline was traced as the disc's own step down (``own_step``: light adds,
+    so that step is its edge inside the other's light too). Discs
     that overlap so are joined into clusters (numbered from 0 by their largest
     disc); a disc on its own has cluster None.
     """
@@ -620,7 +664,8 @@ def _own_outlines(measurements: list[Measurement]) -> tuple[list[np.ndarray], li
                     [cv2.pointPolygonTest(other, (float(x), float(y)), True) >= -OVERLAP_MARGIN_PX for x, y in m.outline_xy]
                 )
                 if inside.any():
-                    own[i] &= ~inside
+                    if not m.own_step:  # a contour through the sum of two discs' light is neither's edge
+                        own[i] &= ~inside
                     parent[root(i)] = root(j)
     roots = [root(i) for i in range(len(measurements))]
     sizes = Counter(roots)

@@ -89,6 +89,8 @@ from bokehfit.discs.candidates import LARGE_DISC_PX, MIN_CONTRAST_ABS, contrast_
 __all__ = [
     "Measurement",
     "measure_candidate",
+    "describe",
+    "polygon_area_centroid",
     "outline_diameter",
     "split_cluster",
     "MIN_SNR",
@@ -255,6 +257,9 @@ class Measurement:
     bright_centre: bool = False  #: centre brighter than the rim, edge a step below it (rim < 0)
     occluded: bool = False  #: a thin occluder bridged across the disc
     thickness: float = 1.0  #: largest inscribed radius over the equal-area radius
+    #: The outline was traced along rays as the disc's own step down (:mod:`bokehfit.discs.rays`): light
+    #: adds, so its seen points are the disc's edge inside other discs' light too.
+    own_step: bool = False
 
 
 
@@ -430,7 +435,7 @@ def _deep_concavities(outline: np.ndarray, depth_px: float) -> int:
     return int((depths > depth_px).sum())
 
 
-def _polygon_area_centroid(xy: np.ndarray) -> tuple[float, float, float]:
+def polygon_area_centroid(xy: np.ndarray) -> tuple[float, float, float]:
     x, y = xy[:, 0], xy[:, 1]
     x1, y1 = np.roll(x, -1), np.roll(y, -1)
     cross = x * y1 - x1 * y
@@ -709,7 +714,7 @@ def measure_candidate(
     radius = max(1.0, 0.5 * diameter_px)
     if cluster:
         found = _closed_outline(luminance, center_xy, radius, 1.3 * max(radius, extent_px) + 2.0, 0.8, CLUSTER_PLATEAU_PERCENTILE)
-        return found if isinstance(found, str) else _describe(luminance, clipped_mask, found, min_noise, min_diameter_px)
+        return found if isinstance(found, str) else describe(luminance, clipped_mask, found, min_noise, min_diameter_px)
     levelled: dict = {}
     found = _two_passes(luminance, center_xy, radius, max(radius, extent_px), 0.8, levelled=levelled)
     hollow = extent_px > RING_REACH * radius and extent_px >= RESOLVABLE_PX  # a ring shows as one from 16 px
@@ -722,16 +727,16 @@ def measure_candidate(
                 break
     if isinstance(found, str):
         return found
-    measured = _describe(luminance, clipped_mask, found, min_noise, min_diameter_px)
+    measured = describe(luminance, clipped_mask, found, min_noise, min_diameter_px)
     if measured.reason == "soft edge":
         step = _step_share(found)
         if step is not None:  # a bright centre: measured again with the top of its edge as the plateau
             (r0, c0, _, _), _, _, outline, _, _, _ = found
-            _, cx, cy = _polygon_area_centroid(outline)
+            _, cx, cy = polygon_area_centroid(outline)
             reach = float(np.max(np.hypot(outline[:, 0] - cx, outline[:, 1] - cy)))
             again = _two_passes(luminance, (cx + c0, cy + r0), reach, reach, 0.8, 90, levelled, 2.0 * step)
             if not isinstance(again, str):
-                stepped = _describe(luminance, clipped_mask, again, min_noise, min_diameter_px)
+                stepped = describe(luminance, clipped_mask, again, min_noise, min_diameter_px)
                 if stepped.reason is None and stepped.diameter_px > measured.diameter_px:
                     return replace(stepped, bright_centre=True)
     return measured
@@ -747,7 +752,7 @@ def _step_share(found) -> float | None:
     """
     _, crop, (background, plateau, _, _), outline, _, _, _ = found
     contrast = plateau - background
-    _, cx, cy = _polygon_area_centroid(outline)
+    _, cx, cy = polygon_area_centroid(outline)
     steepness = []
     for share in BRIGHT_CENTRE_LEVELS:
         contour = _outline(crop, background + share * contrast, background, (cy, cx))
@@ -784,7 +789,7 @@ def outline_diameter(image: np.ndarray, center_xy: tuple[float, float], diameter
     outline = _outline(crop, background + 0.5 * (plateau - background), background, (center_xy[1] - r0, center_xy[0] - c0))
     if outline is None or _open_in_window(outline, crop.shape, window, image.shape):
         return None
-    return 2.0 * math.sqrt(_polygon_area_centroid(outline)[0] / math.pi)
+    return 2.0 * math.sqrt(polygon_area_centroid(outline)[0] / math.pi)
 
 
 def _two_passes(luminance, center_xy, radius, reach, core_rel, percentile=90, levelled=None, edge_rel=1.0):
@@ -795,7 +800,7 @@ def _two_passes(luminance, center_xy, radius, reach, core_rel, percentile=90, le
         if isinstance(found, str):
             return found
         (r0, c0, _, _), _, _, outline, merged, _, _ = found
-        area, cx, cy = _polygon_area_centroid(outline)
+        area, cx, cy = polygon_area_centroid(outline)
         if merged or area <= 0:
             break
         center_xy, radius = (cx + c0, cy + r0), max(1.0, math.sqrt(area / math.pi))
@@ -803,12 +808,12 @@ def _two_passes(luminance, center_xy, radius, reach, core_rel, percentile=90, le
     return found
 
 
-def _describe(luminance, clipped_mask, found, min_noise, min_diameter_px) -> Measurement:
+def describe(luminance, clipped_mask, found, min_noise, min_diameter_px) -> Measurement:
     """The :class:`Measurement` of a closed outline: size, shape, flags, what is seen, and the verdict."""
     height, width = luminance.shape
     (r0, c0, r1, c1), crop, (background, plateau, noise, ring_lift), outline, merged, bridged, on_cut = found
     contrast = plateau - background
-    area, cx, cy = _polygon_area_centroid(outline)
+    area, cx, cy = polygon_area_centroid(outline)
     diameter = 2.0 * math.sqrt(area / math.pi)
     hull_area = float(cv2.contourArea(cv2.convexHull(outline.astype(np.float32))))
     solidity = area / hull_area if hull_area > 0 else 0.0

@@ -1,0 +1,169 @@
+"""The measurement of a disc along rays (:mod:`bokehfit.discs.rays`): faint discs over haze and the
+light of neighbours, overlapping discs, occluders; and what is no disc (a Gaussian glow, a cone,
+noise). The photos are drawn here by geometry (supersampled indicator functions, a Gaussian edge
+blur), not by bokehfit's renderer."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from bokehfit.discs import MIN_NOISE, measure_discs_at
+from bokehfit.discs.measure import measure_candidate
+from bokehfit.discs.rays import measure_rays, pixel_noise
+
+SUPERSAMPLE = 4
+
+
+def _indicator(shape, inside) -> np.ndarray:
+    """The share of each pixel that ``inside(x, y)`` covers (pixel centres at integers)."""
+    height, width = shape
+    offsets = (np.arange(SUPERSAMPLE) + 0.5) / SUPERSAMPLE - 0.5
+    ys = (np.arange(height)[:, None] + offsets[None, :]).reshape(-1)
+    xs = (np.arange(width)[:, None] + offsets[None, :]).reshape(-1)
+    covered = inside(xs[None, :], ys[:, None]).astype(np.float32)
+    return covered.reshape(height, SUPERSAMPLE, width, SUPERSAMPLE).mean(axis=(1, 3))
+
+
+def _circle(centre, diameter):
+    cx, cy = centre
+    return lambda x, y: (x - cx) ** 2 + (y - cy) ** 2 <= (diameter / 2) ** 2
+
+
+def _hexagon(centre, circumradius, angle_deg=15.0):
+    cx, cy = centre
+    inradius = circumradius * math.cos(math.pi / 6)
+    normals = [math.radians(angle_deg + 30 + 60 * k) for k in range(6)]
+
+    def inside(x, y):
+        ok = np.ones(np.broadcast(x, y).shape, bool)
+        for a in normals:
+            ok &= (x - cx) * math.cos(a) + (y - cy) * math.sin(a) <= inradius
+        return ok
+    return inside
+
+
+def _photo(shape, discs, background, blur=1.5, noise=0.004, seed=0):
+    """Discs of light ``(inside, brightness)`` added over ``background`` (light adds), the edges
+    blurred by ``blur`` px, and white noise."""
+    light = np.zeros(shape, np.float32)
+    for inside, brightness in discs:
+        light += brightness * _indicator(shape, inside)
+    light = ndimage.gaussian_filter(light, blur)
+    rng = np.random.default_rng(seed)
+    return (background + light + rng.normal(0.0, noise, shape)).astype(np.float32)
+
+
+def _haze(shape, low=0.25, high=0.45):
+    """Light that brightens to the right and down (vignetting, haze)."""
+    yy, xx = np.mgrid[0 : shape[0], 0 : shape[1]]
+    return (low + (high - low) * (0.6 * xx / shape[1] + 0.4 * yy / shape[0])).astype(np.float32)
+
+
+def test_pixel_noise_reads_white_noise_and_ignores_smooth_light():
+    rng = np.random.default_rng(3)
+    smooth = _haze((200, 200), 0.1, 0.9) + 0.2 * _indicator((200, 200), _circle((100, 100), 120))
+    smooth = ndimage.gaussian_filter(smooth, 2.0)
+    image = smooth + rng.normal(0, 0.01, smooth.shape)
+    assert pixel_noise(image) == pytest.approx(0.01, rel=0.15)
+    assert pixel_noise(smooth) < 0.002
+
+
+def test_a_faint_large_disc_among_brighter_neighbours_is_measured_by_its_edge():
+    """A 160 px disc of 6 % contrast over haze, with two brighter discs overlapping its surround: the
+    surround's spread (the neighbours' light) is far above the disc's contrast, so one level does not
+    outline it (the contour measurement calls it faint); its edge along rays is a clear step."""
+    shape = (420, 520)
+    centre, diameter = (250.0, 210.0), 160.0
+    discs = [(_circle(centre, diameter), 0.02), (_circle((120, 130), 150), 0.3), (_circle((400, 330), 170), 0.25)]
+    image = _photo(shape, discs, _haze(shape), noise=0.003)
+    contour = measure_candidate(image, None, centre, diameter, diameter / 2, MIN_NOISE, 8.0)
+    assert isinstance(contour, str) or contour.reason is not None or abs(contour.diameter_px / diameter - 1) > 0.1
+    m = measure_rays(image, None, centre, diameter, MIN_NOISE, 8.0)
+    assert not isinstance(m, str), m
+    assert m.reason is None, m.reason
+    assert m.diameter_px == pytest.approx(diameter, rel=0.03)
+    assert math.dist(m.center_xy, centre) < 2.0
+    assert m.outline_reliable.mean() > 0.6  # the arcs inside the neighbours' light are its own edge too
+
+
+def test_overlapping_discs_of_different_brightness_each_keep_their_own_outline():
+    """Light adds: where disc A lies over disc B, A's edge is still a step of A's contrast. Each is
+    measured at its place, its size and centre right and its outline seen nearly all round."""
+    shape = (300, 420)
+    a, b = ((160.0, 150.0), 140.0, 0.25), ((260.0, 150.0), 120.0, 0.1)
+    image = _photo(shape, [(_circle(c, d), k) for c, d, k in (a, b)], np.full(shape, 0.05, np.float32))
+    search = measure_discs_at(image, None, [(a[0], a[1]), (b[0], b[1])])
+    assert len(search.discs) == 2, search.rejections
+    for (centre, diameter, _), disc in zip((a, b), sorted(search.discs, key=lambda d: d.center_xy[0])):
+        assert disc.diameter_px == pytest.approx(diameter, rel=0.03)
+        assert math.dist(disc.center_xy, centre) < 2.0
+    rays = measure_rays(image, None, b[0], b[1], MIN_NOISE, 8.0)
+    assert rays.outline_reliable.mean() > 0.9, rays.outline_reliable.mean()
+
+
+def test_a_dark_branch_across_a_disc_is_not_its_edge():
+    """A dark bar in front of a disc: the rays that meet it are not seen, the outline elsewhere is the
+    disc's, and its size is the disc's."""
+    shape = (300, 300)
+    centre, diameter = (150.0, 150.0), 160.0
+    image = _photo(shape, [(_circle(centre, diameter), 0.3)], _haze(shape, 0.2, 0.3))
+    bar = _indicator(shape, lambda x, y: np.abs((x - 150) * 0.8 + (y - 150) * 0.6 - 55) <= 6)
+    image = (image * (1 - 0.9 * ndimage.gaussian_filter(bar, 1.0))).astype(np.float32)
+    m = measure_rays(image, None, centre, diameter, MIN_NOISE, 8.0)
+    assert not isinstance(m, str), m
+    assert m.diameter_px == pytest.approx(diameter, rel=0.04)
+    reliable = m.outline_reliable
+    assert 0.6 < reliable.mean() < 0.97
+    # No seen point lies in the bar.
+    x, y = m.outline_xy[reliable].T
+    assert np.all(np.abs((x - 150) * 0.8 + (y - 150) * 0.6 - 55) > 4.0)
+
+
+def test_a_hexagons_outline_follows_its_blades():
+    shape = (260, 260)
+    inside = _hexagon((130.0, 130.0), 80.0)
+    image = _photo(shape, [(inside, 0.08)], _haze(shape, 0.3, 0.4), noise=0.004)
+    m = measure_rays(image, None, (128.0, 133.0), 140.0, MIN_NOISE, 8.0)
+    assert not isinstance(m, str) and m.reason is None, m
+    truth = _indicator(shape, inside) > 0.5
+    import cv2
+    drawn = np.zeros(shape, np.uint8)
+    cv2.fillPoly(drawn, [np.round(m.outline_xy * 16).astype(np.int32)], 1, shift=4)
+    iou = (truth & (drawn > 0)).sum() / (truth | (drawn > 0)).sum()
+    assert iou > 0.97, iou
+
+
+@pytest.mark.parametrize("kind", ["gaussian", "cone"])
+def test_a_glow_without_a_step_is_no_disc(kind):
+    """A Gaussian glow and a cone of light have no step at their edge: their edges are as wide as
+    they are ("soft edge"), whatever size is asked for."""
+    shape = (300, 300)
+    yy, xx = np.mgrid[0:300, 0:300]
+    distance = np.hypot(xx - 150.0, yy - 150.0)
+    glow = np.exp(-0.5 * (distance / 40.0) ** 2) if kind == "gaussian" else np.clip(1 - distance / 90.0, 0, None)
+    image = (0.1 + 0.3 * glow + np.random.default_rng(1).normal(0, 0.003, shape)).astype(np.float32)
+    for diameter in (80.0, 100.0, 140.0):
+        m = measure_rays(image, None, (150.0, 150.0), diameter, MIN_NOISE, 8.0)
+        assert isinstance(m, str) or m.reason is not None, (diameter, m.diameter_px, m.edge_width_px)
+
+
+def test_noise_alone_has_no_outline():
+    image = (0.3 + np.random.default_rng(2).normal(0, 0.01, (200, 200))).astype(np.float32)
+    m = measure_rays(image, None, (100.0, 100.0), 80.0, MIN_NOISE, 8.0)
+    assert isinstance(m, str) or m.reason is not None
+
+
+def test_a_disc_cut_by_the_frame_is_seen_where_the_frame_does_not_cut_it():
+    shape = (200, 300)
+    centre, diameter = (40.0, 100.0), 120.0  # a third of it beyond the left edge
+    image = _photo(shape, [(_circle(centre, diameter), 0.2)], np.full(shape, 0.1, np.float32))
+    m = measure_rays(image, None, centre, diameter, MIN_NOISE, 8.0)
+    assert not isinstance(m, str), m
+    assert m.clipped  # cut by the frame
+    seen = m.outline_xy[m.outline_reliable]
+    assert seen[:, 0].min() > 0.5
+    assert np.abs(np.hypot(*(seen - np.array(centre)).T) - diameter / 2).max() < 1.5
