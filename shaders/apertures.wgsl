@@ -441,7 +441,7 @@ fn sample_aperture_params(u: vec2f, params: ApertureParams, channel: u32) -> vec
     }
     var weight = 1.0;
     if (params.vignetting_radius > 0.0) {
-        weight = vignetting_weight(p, vec2f(params.field_x, params.field_y), params.vignetting_radius, params.vignetting_shift);
+        weight = vignetting_weight(p, params.field_position, params.vignetting_radius, params.vignetting_shift);
     }
     var scale = 1.0;
     if (channel == CHANNEL_RED) {

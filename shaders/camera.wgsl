@@ -22,8 +22,7 @@ struct Ray {
 // geometry makes it.
 fn aperture_seen(q: vec2f, near: bool) -> ApertureParams {
     var a = lens_aperture();
-    a.field_x = q.x;
-    a.field_y = q.y;
+    a.field_position = q;
     if (near) {
         a.rim = -a.rim;
         a.chromatic_red = -a.chromatic_red;
@@ -42,7 +41,7 @@ fn aperture_point(u: vec2f, a: ApertureParams, channel: u32) -> vec3f {
 // Field position q of a point of the image (pixels from the top-left corner): its
 // offset from the image centre in half-diagonals, y up (design.md §3b).
 fn field_position(image_xy: vec2f) -> vec2f {
-    let size = vec2f(f32(params.image_width), f32(params.image_height));
+    let size = vec2f(params.image_size);
     let offset = image_xy - 0.5 * size;
     return image_to_aperture(offset.yx) / (0.5 * length(size));
 }
@@ -50,23 +49,20 @@ fn field_position(image_xy: vec2f) -> vec2f {
 // Pinhole direction (x/z, y/z, 1) of a point of the image, given in pixels from
 // the top-left corner of the whole image (row downward, design.md §2).
 fn pinhole_direction(image_xy: vec2f) -> vec3f {
-    let half_size = 0.5 * vec2f(f32(params.image_width), f32(params.image_height));
+    let half_size = 0.5 * vec2f(params.image_size);
     let ndc = image_to_aperture((image_xy - half_size).yx) / half_size;
-    return vec3f(ndc.x * params.tan_half_x, ndc.y * params.tan_half_y, 1.0);
+    return vec3f(ndc * params.tan_half, 1.0);
 }
 
 // Inverse of pinhole_direction: image position (pixels) of the slopes (x/z, y/z).
 fn pinhole_image_xy(slope: vec2f) -> vec2f {
-    let ndc = slope / vec2f(params.tan_half_x, params.tan_half_y);
-    let half_size = 0.5 * vec2f(f32(params.image_width), f32(params.image_height));
+    let ndc = slope / params.tan_half;
+    let half_size = 0.5 * vec2f(params.image_size);
     return half_size + aperture_to_image(ndc * half_size).yx;
 }
 
 fn camera_to_world(v: vec3f) -> vec3f {
-    let right = vec3f(params.right_x, params.right_y, params.right_z);
-    let up = vec3f(params.up_x, params.up_y, params.up_z);
-    let forward = vec3f(params.forward_x, params.forward_y, params.forward_z);
-    return v.x * right + v.y * up + v.z * forward;
+    return v.x * params.right + v.y * params.up + v.z * params.forward;
 }
 
 // World-space lens ray through the image point image_xy and the aperture point lens_xy
@@ -76,6 +72,5 @@ fn camera_ray(image_xy: vec2f, lens_xy: vec2f) -> Ray {
     let lens = vec3f(lens_xy, 0.0);
     // |focus_hit − lens| ≥ focus_distance > 0 (the z components differ by it): no zero vector.
     let direction = normalize(focus_hit - lens);
-    let position = vec3f(params.position_x, params.position_y, params.position_z);
-    return Ray(position + camera_to_world(lens), camera_to_world(direction));
+    return Ray(params.position + camera_to_world(lens), camera_to_world(direction));
 }

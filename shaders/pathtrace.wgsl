@@ -115,8 +115,8 @@ fn unoccluded(p: vec3f, n: vec3f, wi: vec3f, dist: f32) -> bool {
 // mirror's reflectance.
 fn via_mirror(p: vec3f, n: vec3f, y: vec3f, na: vec3f, index: u32) -> vec3f {
     let q = nee_quads[index];
-    let o = vec3f(q.origin_x, q.origin_y, q.origin_z);
-    let nm = normalize(cross(vec3f(q.u_x, q.u_y, q.u_z), vec3f(q.v_x, q.v_y, q.v_z)));
+    let o = q.origin;
+    let nm = normalize(cross(q.u, q.v));
     let y_image = y - 2.0 * dot(y - o, nm) * nm;
     let na_image = na - 2.0 * dot(na, nm) * nm;
     var wi = vec3f(0.0);
@@ -136,7 +136,7 @@ fn via_mirror(p: vec3f, n: vec3f, y: vec3f, na: vec3f, index: u32) -> vec3f {
     if (dist <= RAY_EPSILON || !unoccluded(m, side, to_light / dist, dist)) {
         return vec3f(0.0);
     }
-    return g * material_albedo(materials[q.material]);
+    return g * materials[q.material].albedo;
 }
 
 // Radiance reflected towards the path by a Lambertian vertex (albedo left out):
@@ -148,10 +148,8 @@ fn direct_light(p: vec3f, n: vec3f, stream: u32, dim: u32) -> vec3f {
     }
     let k = min(u32(rand(stream, dim) * f32(LIGHT_COUNT)), max(LIGHT_COUNT, 1u) - 1u);
     let q = nee_quads[k];
-    let u = vec3f(q.u_x, q.u_y, q.u_z);
-    let v = vec3f(q.v_x, q.v_y, q.v_z);
-    let y = vec3f(q.origin_x, q.origin_y, q.origin_z) + rand(stream, dim + 1u) * u + rand(stream, dim + 2u) * v;
-    let na = cross(u, v);
+    let y = q.origin + rand(stream, dim + 1u) * q.u + rand(stream, dim + 2u) * q.v;
+    let na = cross(q.u, q.v);
     var total = vec3f(0.0);
     var wi = vec3f(0.0);
     let g = light_geometry(p, n, y, na, &wi);
@@ -162,7 +160,7 @@ fn direct_light(p: vec3f, n: vec3f, stream: u32, dim: u32) -> vec3f {
         total += via_mirror(p, n, y, na, LIGHT_COUNT + j);
     }
     // (1/π)·Le·G divided by the pdf 1/(count·area) of the light point (area is in G).
-    return material_emission(materials[q.material]) * total * (f32(LIGHT_COUNT) / PI);
+    return materials[q.material].emission * total * (f32(LIGHT_COUNT) / PI);
 }
 
 fn trace(first: Ray, stream: u32) -> vec3f {
@@ -183,7 +181,7 @@ fn trace(first: Ray, stream: u32) -> vec3f {
         let n = select(-hit.normal, hit.normal, front);
         if (m.kind == MATERIAL_EMITTER) {
             if (!covered && front) {
-                radiance += throughput * material_emission(m);
+                radiance += throughput * m.emission;
             }
             break;
         }
@@ -193,7 +191,7 @@ fn trace(first: Ray, stream: u32) -> vec3f {
             let planar = hit.object >= LIGHT_COUNT && hit.object < LIGHT_COUNT + MIRROR_COUNT;
             covered = covered && planar && !mirrored;
             mirrored = true;
-            throughput *= material_albedo(m);
+            throughput *= m.albedo;
             ray = Ray(p + RAY_EPSILON * n, reflect(ray.direction, n));
         } else {
             let albedo = surface_albedo(m, hit.uv);
@@ -217,12 +215,12 @@ fn trace(first: Ray, stream: u32) -> vec3f {
 
 @compute @workgroup_size(WORKGROUP_SIZE_X, WORKGROUP_SIZE_Y)
 fn main(@builtin(global_invocation_id) gid: vec3u) {
-    if (gid.x >= params.tile_width || gid.y >= params.tile_height) {
+    if (any(gid.xy >= params.tile_size)) {
         return;
     }
-    let col = params.tile_x + gid.x;
-    let row = params.tile_y + gid.y;
-    let stream = (row * params.image_width + col) ^ pcg_hash(params.seed);
+    let col = params.tile_origin.x + gid.x;
+    let row = params.tile_origin.y + gid.y;
+    let stream = (row * params.image_size.x + col) ^ pcg_hash(params.seed);
     let image_xy = vec2f(f32(col), f32(row)) + vec2f(rand(stream, 0u), rand(stream, 1u));
     let q = field_position(image_xy);
     let u_lens = vec2f(rand(stream, 2u), rand(stream, 3u));
@@ -243,14 +241,13 @@ fn main(@builtin(global_invocation_id) gid: vec3u) {
         if (sided) {
             let hit = intersect_scene(ray, NO_HIT);
             // The lens point lies in the camera's plane z = 0: the hit's depth is t·(direction·forward).
-            let forward = vec3f(params.forward_x, params.forward_y, params.forward_z);
-            let hit_near = hit.t < NO_HIT && hit.t * dot(ray.direction, forward) < params.focus_distance;
+            let hit_near = hit.t < NO_HIT && hit.t * dot(ray.direction, params.forward) < params.focus_distance;
             weight *= select(0.0, 2.0, hit_near == near);
         }
         if (weight > 0.0) {
             radiance = weight * colour * trace(ray, stream);
         }
     }
-    let i = gid.y * params.tile_width + gid.x;
+    let i = gid.y * params.tile_size.x + gid.x;
     accum[i] += vec4f(radiance, 1.0);
 }

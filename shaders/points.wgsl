@@ -40,7 +40,7 @@ fn stratified_u(i: u32) -> vec2f {
 @compute @workgroup_size(WORKGROUP_SIZE_X)
 fn splat(@builtin(global_invocation_id) gid: vec3u, @builtin(num_workgroups) groups: vec3u) {
     let threads = groups.x * WORKGROUP_SIZE_X;
-    let centre = vec2f(light.slope_x, light.slope_y);
+    let centre = light.slope;
     let aperture = aperture_seen(field_position(pinhole_image_xy(centre)), light.inv_depth > 1.0 / params.focus_distance);
     for (var k = gid.x; k < light.count; k += threads) {
         let drawn = aperture_point(stratified_u(light.first + k), aperture, light.channel);
@@ -54,10 +54,9 @@ fn splat(@builtin(global_invocation_id) gid: vec3u, @builtin(num_workgroups) gro
         // aperture is upright; in front of it the factor is negative: turned by 180°.
         let slope = a * (1.0 / params.focus_distance - light.inv_depth) + centre;
         let xy = pinhole_image_xy(slope);
-        let col = floor(xy.x) - f32(params.tile_x);
-        let row = floor(xy.y) - f32(params.tile_y);
-        if (col >= 0.0 && col < f32(params.tile_width) && row >= 0.0 && row < f32(params.tile_height)) {
-            atomicAdd(&counts[u32(row) * params.tile_width + u32(col)], 1u);
+        let pixel = floor(xy) - vec2f(params.tile_origin);
+        if (all(pixel >= vec2f(0.0)) && all(pixel < vec2f(params.tile_size))) {
+            atomicAdd(&counts[u32(pixel.y) * params.tile_size.x + u32(pixel.x)], 1u);
         }
     }
 }
@@ -65,12 +64,11 @@ fn splat(@builtin(global_invocation_id) gid: vec3u, @builtin(num_workgroups) gro
 @compute @workgroup_size(WORKGROUP_SIZE_X)
 fn resolve(@builtin(global_invocation_id) gid: vec3u, @builtin(num_workgroups) groups: vec3u) {
     let threads = groups.x * WORKGROUP_SIZE_X;
-    let pixels = params.tile_width * params.tile_height;
-    let weight = vec3f(light.weight_r, light.weight_g, light.weight_b);
+    let pixels = params.tile_size.x * params.tile_size.y;
     for (var i = gid.x; i < pixels; i += threads) {
         let count = atomicLoad(&counts[i]);
         if (count != 0u) {
-            accum[i] += vec4f(weight * f32(count), 0.0);
+            accum[i] += vec4f(light.weight * f32(count), 0.0);
             atomicStore(&counts[i], 0u);
         }
     }

@@ -35,19 +35,11 @@ struct Hit {
 
 const OBJECT_OTHER: u32 = 0xffffffffu;
 
-fn material_albedo(m: Material) -> vec3f {
-    return vec3f(m.albedo_r, m.albedo_g, m.albedo_b);
-}
-
-fn material_emission(m: Material) -> vec3f {
-    return vec3f(m.emission_r, m.emission_g, m.emission_b);
-}
-
 // Diffuse albedo at a point: the base colour, darkened on every other checker
 // square, and line_albedo on the thin grid lines (a line starts at every
 // multiple of line_spacing and is line_width wide). NumPy twin: Material.albedo_at.
 fn surface_albedo(m: Material, uv: vec2f) -> vec3f {
-    var albedo = material_albedo(m);
+    var albedo = m.albedo;
     if (m.checker_size > 0.0) {
         let cell = floor(uv / m.checker_size);
         if (abs(cell.x + cell.y) % 2.0 == 1.0) {
@@ -64,9 +56,9 @@ fn surface_albedo(m: Material, uv: vec2f) -> vec3f {
 }
 
 fn intersect_quad(ray: Ray, q: Quad, index: u32, t_max: f32, best: ptr<function, Hit>) {
-    let o = vec3f(q.origin_x, q.origin_y, q.origin_z);
-    let u = vec3f(q.u_x, q.u_y, q.u_z);
-    let v = vec3f(q.v_x, q.v_y, q.v_z);
+    let o = q.origin;
+    let u = q.u;
+    let v = q.v;
     let n = cross(u, v);
     let denom = dot(n, ray.direction);
     if (abs(denom) < 1e-20) {
@@ -91,17 +83,17 @@ fn intersect_quad(ray: Ray, q: Quad, index: u32, t_max: f32, best: ptr<function,
     (*best).object = index;
 }
 
-// Box of half-size h about its centre, its local x axis along (axis_x, 0, axis_z).
+// Box of half-size b.half about b.center, its local x axis along (axis_xz.x, 0, axis_xz.y).
 fn intersect_box(ray: Ray, b: Box, t_max: f32, best: ptr<function, Hit>) {
-    let ax = vec3f(b.axis_x, 0.0, b.axis_z);
-    let az = vec3f(-b.axis_z, 0.0, b.axis_x);
-    let rel = ray.origin - vec3f(b.center_x, b.center_y, b.center_z);
+    let ax = vec3f(b.axis_xz.x, 0.0, b.axis_xz.y);
+    let az = vec3f(-b.axis_xz.y, 0.0, b.axis_xz.x);
+    let rel = ray.origin - b.center;
     let o = vec3f(dot(rel, ax), rel.y, dot(rel, az));
     var d = vec3f(dot(ray.direction, ax), ray.direction.y, dot(ray.direction, az));
     // Keep every component away from 0 so that 1/d stays finite (WGSL has no inf).
     d = select(d, select(vec3f(-1e-20), vec3f(1e-20), d >= vec3f(0.0)), abs(d) < vec3f(1e-20));
     let inv = 1.0 / d;
-    let h = vec3f(b.half_x, b.half_y, b.half_z);
+    let h = b.half;
     let t0 = (-h - o) * inv;
     let t1 = (h - o) * inv;
     let near = min(t0, t1);
@@ -132,7 +124,7 @@ fn intersect_box(ray: Ray, b: Box, t_max: f32, best: ptr<function, Hit>) {
 }
 
 fn intersect_sphere(ray: Ray, s: Sphere, t_max: f32, best: ptr<function, Hit>) {
-    let c = vec3f(s.center_x, s.center_y, s.center_z);
+    let c = s.center;
     let oc = ray.origin - c;
     let b = dot(oc, ray.direction);
     // Distance² from the centre to the line, computed from the perpendicular part

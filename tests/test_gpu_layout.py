@@ -123,6 +123,54 @@ def test_check_wgsl_reads_a_hand_written_declaration_and_names_the_difference():
         s.check_wgsl("struct Light { intensity: f32, @align(16) position: vec3f, index: u32 }")
 
 
+def _layouts():
+    from bokehfit.gpu.shaders import APERTURE_PARAMS
+    from bokehfit.kernels.mc import KERNEL_PARAMS
+    from bokehfit.scene.geometry import BOX, MATERIAL, QUAD, SPHERE
+    from bokehfit.scene.renderer import POINT_PARAMS, RENDER_PARAMS
+
+    return (RENDER_PARAMS, POINT_PARAMS, KERNEL_PARAMS, APERTURE_PARAMS, MATERIAL, QUAD, BOX, SPHERE)
+
+
+def _compiled_sources() -> dict[str, str]:
+    """The WGSL every dispatched shader is compiled from, includes resolved."""
+    from bokehfit.kernels.mc import kernel_mc_source
+    from bokehfit.scene import cornell_box
+    from bokehfit.scene.renderer import pathtrace_source, points_source
+    from bokehfit.scene.wgsl import scene_wgsl
+
+    return {
+        "pathtrace.wgsl": pathtrace_source(scene_wgsl(cornell_box())),
+        "points.wgsl": points_source(),
+        "kernel_mc.wgsl": kernel_mc_source(),
+    }
+
+
+def test_the_shaders_declare_the_generated_structs_and_no_others_of_their_names():
+    from bokehfit.gpu.shaders import shader_dir
+
+    sources = _compiled_sources()
+    for struct in _layouts():
+        users = [name for name, source in sources.items() if f"struct {struct.name} " in source]
+        assert users, f"no shader declares {struct.name}"
+        for name in users:
+            struct.check_wgsl(sources[name])
+            assert sources[name].count(f"struct {struct.name} ") == 1, name
+    hand_written = {struct.name for struct in _layouts()}
+    for entry in shader_dir().iterdir():
+        if entry.name.endswith(".wgsl"):
+            text = entry.read_text(encoding="utf-8")
+            declared = {name for name in hand_written if f"struct {name} " in text or f"struct {name}{{" in text}
+            assert not declared, f"{entry.name} declares {declared} by hand: include the generated struct"
+
+
+def test_no_layout_has_hand_written_padding_or_split_vectors():
+    for struct in _layouts():
+        for name, _ in struct.fields:
+            assert not name.startswith("pad"), f"{struct.name}.{name}: the layout pads itself"
+            assert not name.endswith(("_x", "_y", "_z", "_r", "_g", "_b")), f"{struct.name}.{name}: use a vector field"
+
+
 # --- the adapter's own reading -----------------------------------------------------------------
 
 
@@ -170,9 +218,9 @@ def _run(gpu, code: str, buffers: list[tuple[bytes, str]], words: int) -> np.nda
     return np.frombuffer(device.queue.read_buffer(out), dtype=np.uint32).copy()
 
 
-@pytest.mark.parametrize("name", ["EveryKind"])
+@pytest.mark.parametrize("name", ["EveryKind", "RenderParams", "PointParams", "KernelParams", "ApertureParams"])
 def test_the_shader_compiler_reads_each_uniform_field_where_numpy_packed_it(name, gpu):
-    struct = {s.name: s for s in (EVERY_KIND,)}[name]
+    struct = {s.name: s for s in (EVERY_KIND, *_layouts())}[name]
     values = _component_values(struct, np.random.default_rng(len(name)))
     record = struct.record(**values)
     expected = _expected_words(struct, record)
@@ -190,12 +238,9 @@ def test_the_shader_compiler_reads_each_uniform_field_where_numpy_packed_it(name
     np.testing.assert_array_equal(_run(gpu, code, [(record.tobytes(), "uniform")], len(expected)), expected)
 
 
-ARRAY_ELEMENT = Struct("Element", (("position", "vec3f"), ("index", "u32"), ("uv", "vec2f"), ("weight", "f32")))
-
-
-@pytest.mark.parametrize("name", ["Element"])
+@pytest.mark.parametrize("name", ["Material", "Quad", "Box", "Sphere"])
 def test_a_numpy_array_of_records_has_the_wgsl_array_stride(name, gpu):
-    struct = {s.name: s for s in (ARRAY_ELEMENT,)}[name]
+    struct = {s.name: s for s in _layouts()}[name]
     rng = np.random.default_rng(len(name))
     records = np.zeros(3, dtype=struct.dtype)
     for i in range(3):

@@ -108,8 +108,11 @@ def test_uniform_layout_is_render_params(server):
     config = json.loads(body)
     layout = config["uniform"]
     assert [(f["name"], f["type"]) for f in layout["fields"]] == list(RENDER_PARAMS.fields)
-    assert [f["offset"] for f in layout["fields"]] == [4 * i for i in range(len(RENDER_PARAMS.fields))]
-    assert layout["size_bytes"] == RENDER_PARAMS.dtype.itemsize
+    # The page packs each component at the offset NumPy's dtype puts it (WGSL's alignment).
+    assert [f["offset"] for f in layout["fields"]] == [RENDER_PARAMS.dtype.fields[f["name"]][1] for f in layout["fields"]]
+    for f in layout["fields"]:
+        assert (f["scalar"], f["components"]) in {("f32", 1), ("u32", 1), ("i32", 1)} | {(s, n) for s in ("f32", "u32") for n in (2, 3)}
+    assert layout["size_bytes"] == RENDER_PARAMS.dtype.itemsize == RENDER_PARAMS.buffer_size
     assert layout["wgsl"] == RENDER_PARAMS.wgsl()
     assert config["shader"]["entry_point"] == "main" and config["shader"]["workgroup_size"] == [8, 8, 1]
     assert [s["name"] for s in config["shapes"]] == list(SHAPES)
@@ -148,8 +151,8 @@ def test_params_are_the_lens_values(server):
     assert values["aperture_scale"] == f32(lens.aperture_scale_m)
     assert values["focus_distance"] == f32(0.9)
     assert values["cos_angle"] == f32(math.cos(math.radians(100))) and values["sin_angle"] == f32(math.sin(math.radians(100)))
-    assert (values["tan_half_x"], values["tan_half_y"]) == tuple(f32(t) for t in lens.tan_half_fov(96, 64))
-    assert (values["tile_x"], values["tile_y"], values["tile_width"], values["tile_height"]) == (0, 0, 96, 64)
+    assert values["tan_half"] == [f32(t) for t in lens.tan_half_fov(96, 64)]
+    assert (values["image_size"], values["tile_origin"], values["tile_size"]) == ([96, 64], [0, 0], [96, 64])
     assert values["sample_index"] == 0
     assert answer["describe"] == lens.describe()
     assert answer["symmetry_deg"] == pytest.approx(360 / 7)
@@ -186,7 +189,7 @@ def test_params_carry_the_real_lens_features(server):
         vignetting=dict(radius=1.2, shift=0.8), chromatic=dict(red=0.03, blue=-0.02),
     )
     for name, value in lens.aperture.shader_params().items():
-        assert values[name] == pytest.approx(f32(value)), name
+        assert values[name] == pytest.approx(np.float32(value).tolist()), name
     assert answer["lens"]["vignetting"] == {"radius": 1.2, "shift": 0.8}
     assert answer["lens"]["chromatic"] == {"red": 0.03, "blue": -0.02}
     assert answer["describe"] == lens.describe()

@@ -159,7 +159,8 @@ VERTICES_MAX_ERROR = 1e-6
 
 #: The one description of the WGSL ``ApertureParams`` struct (bokehfit.gpu.layout
 #: builds the struct and its NumPy dtype from it; :meth:`Aperture.shader_params`
-#: fills it). ``vignetting_radius`` 0 means no vignetting.
+#: fills it). ``vignetting_radius`` 0 means no vignetting; ``field_position`` is the q of
+#: :meth:`Aperture.sample` (half-diagonals, y up).
 APERTURE_PARAM_FIELDS = (
     ("shape", "u32"),
     ("blades", "u32"),
@@ -171,8 +172,7 @@ APERTURE_PARAM_FIELDS = (
     ("rim", "f32"),
     ("vignetting_radius", "f32"),
     ("vignetting_shift", "f32"),
-    ("field_x", "f32"),
-    ("field_y", "f32"),
+    ("field_position", "vec2f"),
     ("chromatic_red", "f32"),
     ("chromatic_blue", "f32"),
     ("mask_width", "u32"),
@@ -646,8 +646,7 @@ class Aperture:
             "rim": self.rim,
             "vignetting_radius": 0.0 if self.vignetting is None else self.vignetting.radius,
             "vignetting_shift": 0.0 if self.vignetting is None else self.vignetting.shift,
-            "field_x": float(q[0]),
-            "field_y": float(q[1]),
+            "field_position": (float(q[0]), float(q[1])),
             "chromatic_red": 0.0 if self.chromatic is None else self.chromatic.red,
             "chromatic_blue": 0.0 if self.chromatic is None else self.chromatic.blue,
             "mask_width": 0 if self.mask is None else self.mask.shape[1],

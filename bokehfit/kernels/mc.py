@@ -28,7 +28,7 @@ from bokehfit.gpu.compute import Binding, ComputeInterface, dispatch
 from bokehfit.gpu.layout import Struct
 from bokehfit.gpu.shaders import APERTURE_PARAMS, MASK_TABLE_BINDING, MASK_TABLE_READ, load_shader, mask_table_data
 
-__all__ = ["KERNEL_INTERFACE", "KERNEL_PARAMS", "band_rows", "mc_counts", "prepare_pipeline"]
+__all__ = ["KERNEL_INTERFACE", "KERNEL_PARAMS", "band_rows", "kernel_mc_source", "mc_counts", "prepare_pipeline"]
 
 KERNEL_PARAMS = Struct(
     "KernelParams",
@@ -58,14 +58,18 @@ KERNEL_INTERFACE = ComputeInterface(
 _SAMPLES_PER_THREAD = 16
 
 
+def kernel_mc_source() -> str:
+    """The whole ``kernel_mc.wgsl``, every include resolved (with the current :data:`KERNEL_INTERFACE`)."""
+    return load_shader("kernel_mc.wgsl", {"KernelParams": KERNEL_PARAMS.wgsl(), "interface": KERNEL_INTERFACE.wgsl(), "mask_table": MASK_TABLE_READ})
+
+
 @lru_cache(maxsize=None)
 def prepare_pipeline(adapter: AdapterChoice | None = None):
     """Open the GPU that ``adapter`` chooses and compile ``kernel_mc.wgsl`` (once per choice)."""
     import wgpu
 
     device = get_gpu(adapter).device
-    code = load_shader("kernel_mc.wgsl", {"KernelParams": KERNEL_PARAMS.wgsl(), "interface": KERNEL_INTERFACE.wgsl(), "mask_table": MASK_TABLE_READ})
-    module = device.create_shader_module(label="kernel_mc", code=code)
+    module = device.create_shader_module(label="kernel_mc", code=kernel_mc_source())
     return device.create_compute_pipeline(layout=wgpu.AutoLayoutMode.auto, compute={"module": module, "entry_point": "main"})
 
 

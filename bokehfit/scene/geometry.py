@@ -3,9 +3,9 @@
 A :class:`Scene` is a list of analytic shapes (quads, boxes turned about the
 vertical axis, spheres), named materials, and the camera's pose. Only what a
 Cornell box needs: no meshes, no BVH. The buffers follow ``shaders/scene.wgsl``;
-each layout is one :class:`bokehfit.gpu.layout.Struct` whose field count is a
-multiple of 4, so that the NumPy record (padded to 16 bytes) and the WGSL
-array stride agree.
+each layout is one :class:`bokehfit.gpu.layout.Struct` (points and
+directions are ``vec3f`` fields) whose WGSL size is a multiple of 16 bytes, so
+that the NumPy record (padded to 16 bytes) and the WGSL array stride agree.
 
 World space is right-handed, y up, metres. The camera's right is
 ``forward × up`` (as in Mitsuba's ``look_at``, whose "left" is ``up × forward``).
@@ -43,12 +43,8 @@ MATERIAL = Struct(
     "Material",
     (
         ("kind", "u32"),
-        ("albedo_r", "f32"),
-        ("albedo_g", "f32"),
-        ("albedo_b", "f32"),
-        ("emission_r", "f32"),
-        ("emission_g", "f32"),
-        ("emission_b", "f32"),
+        ("albedo", "vec3f"),
+        ("emission", "vec3f"),
         ("checker_size", "f32"),
         ("checker_contrast", "f32"),
         ("line_spacing", "f32"),
@@ -56,57 +52,14 @@ MATERIAL = Struct(
         ("line_albedo", "f32"),
     ),
 )
-QUAD = Struct(
-    "Quad",
-    (
-        ("origin_x", "f32"),
-        ("origin_y", "f32"),
-        ("origin_z", "f32"),
-        ("u_x", "f32"),
-        ("u_y", "f32"),
-        ("u_z", "f32"),
-        ("v_x", "f32"),
-        ("v_y", "f32"),
-        ("v_z", "f32"),
-        ("material", "u32"),
-        ("pad0", "u32"),
-        ("pad1", "u32"),
-    ),
-)
-BOX = Struct(
-    "Box",
-    (
-        ("center_x", "f32"),
-        ("center_y", "f32"),
-        ("center_z", "f32"),
-        ("half_x", "f32"),
-        ("half_y", "f32"),
-        ("half_z", "f32"),
-        ("axis_x", "f32"),
-        ("axis_z", "f32"),
-        ("material", "u32"),
-        ("pad0", "u32"),
-        ("pad1", "u32"),
-        ("pad2", "u32"),
-    ),
-)
-SPHERE = Struct(
-    "Sphere",
-    (
-        ("center_x", "f32"),
-        ("center_y", "f32"),
-        ("center_z", "f32"),
-        ("radius", "f32"),
-        ("material", "u32"),
-        ("pad0", "u32"),
-        ("pad1", "u32"),
-        ("pad2", "u32"),
-    ),
-)
+QUAD = Struct("Quad", (("origin", "vec3f"), ("u", "vec3f"), ("v", "vec3f"), ("material", "u32")))
+#: ``axis_xz``: the box's local x axis (cos a, sin a) in world (x, z).
+BOX = Struct("Box", (("center", "vec3f"), ("half", "vec3f"), ("axis_xz", "vec2f"), ("material", "u32")))
+SPHERE = Struct("Sphere", (("center", "vec3f"), ("radius", "f32"), ("material", "u32")))
 
 for _struct in (MATERIAL, QUAD, BOX, SPHERE):
-    # WGSL's array stride of a struct of n 4-byte scalars is 4n; the padded dtype's is 16⌈n/4⌉.
-    assert len(_struct.fields) % 4 == 0, f"{_struct.name}: field count must be a multiple of 4"
+    # A NumPy array of records strides by the dtype's 16-byte multiple, a WGSL array by SizeOf.
+    assert _struct.size == _struct.dtype.itemsize, f"{_struct.name}: its WGSL size must be a multiple of 16 bytes"
 
 Vec3 = tuple[float, float, float]
 
@@ -272,12 +225,8 @@ def scene_buffers(scene: Scene) -> dict[str, object]:
     materials = [
         dict(
             kind=MATERIAL_KINDS.index(m.kind),
-            albedo_r=m.albedo[0],
-            albedo_g=m.albedo[1],
-            albedo_b=m.albedo[2],
-            emission_r=m.emission[0],
-            emission_g=m.emission[1],
-            emission_b=m.emission[2],
+            albedo=m.albedo,
+            emission=m.emission,
             checker_size=m.checker_size,
             checker_contrast=m.checker_contrast,
             line_spacing=m.line_spacing,
@@ -286,28 +235,17 @@ def scene_buffers(scene: Scene) -> dict[str, object]:
         )
         for m in scene.materials
     ]
-    quad_rows = [
-        dict(
-            origin_x=q.origin[0], origin_y=q.origin[1], origin_z=q.origin[2],
-            u_x=q.u[0], u_y=q.u[1], u_z=q.u[2],
-            v_x=q.v[0], v_y=q.v[1], v_z=q.v[2],
-            material=index[q.material],
-        )
-        for q in quads
-    ]
+    quad_rows = [dict(origin=q.origin, u=q.u, v=q.v, material=index[q.material]) for q in quads]
     box_rows = [
         dict(
-            center_x=b.center[0], center_y=b.center[1], center_z=b.center[2],
-            half_x=b.half[0], half_y=b.half[1], half_z=b.half[2],
-            axis_x=math.cos(math.radians(b.angle_deg)), axis_z=math.sin(math.radians(b.angle_deg)),
+            center=b.center,
+            half=b.half,
+            axis_xz=(math.cos(math.radians(b.angle_deg)), math.sin(math.radians(b.angle_deg))),
             material=index[b.material],
         )
         for b in scene.boxes
     ]
-    sphere_rows = [
-        dict(center_x=s.center[0], center_y=s.center[1], center_z=s.center[2], radius=s.radius, material=index[s.material])
-        for s in scene.spheres
-    ]
+    sphere_rows = [dict(center=s.center, radius=s.radius, material=index[s.material]) for s in scene.spheres]
     return dict(
         materials=_records(MATERIAL, materials),
         quads=_records(QUAD, quad_rows),

@@ -49,38 +49,26 @@ from bokehfit.scene.geometry import BOX, MATERIAL, QUAD, SPHERE, Pose, Scene
 from bokehfit.scene.wgsl import scene_wgsl
 from bokehfit.scene.points import PointScene
 
-__all__ = ["RENDER_PARAMS", "POINT_PARAMS", "RenderResult", "lens_aperture_wgsl", "pathtrace_source", "render_params", "render_scene", "set_tile", "tile_plan", "total_work", "estimate_render_s", "DEFAULT_MAX_TILE_PIXELS", "QUICK_WORK"]
+__all__ = ["RENDER_PARAMS", "POINT_PARAMS", "RenderResult", "lens_aperture_wgsl", "pathtrace_source", "points_source", "render_params", "render_scene", "set_tile", "tile_plan", "total_work", "estimate_render_s", "DEFAULT_MAX_TILE_PIXELS", "QUICK_WORK"]
 
 #: RenderParams = the image and tile, the lens's aperture (the fields of the WGSL
 #: ``ApertureParams``, :data:`bokehfit.apertures.APERTURE_PARAM_FIELDS`, which the generated
 #: ``lens_aperture()`` copies out: :func:`lens_aperture_wgsl`), then the camera.
 _IMAGE_FIELDS = (
-    ("image_width", "u32"),
-    ("image_height", "u32"),
-    ("tile_x", "u32"),
-    ("tile_y", "u32"),
-    ("tile_width", "u32"),
-    ("tile_height", "u32"),
+    ("image_size", "vec2u"),  # width, height
+    ("tile_origin", "vec2u"),  # the tile's first column and row
+    ("tile_size", "vec2u"),  # its width and height
     ("sample_index", "u32"),
     ("seed", "u32"),
 )
 _CAMERA_FIELDS = (
     ("aperture_scale", "f32"),
     ("focus_distance", "f32"),
-    ("tan_half_x", "f32"),
-    ("tan_half_y", "f32"),
-    ("position_x", "f32"),
-    ("position_y", "f32"),
-    ("position_z", "f32"),
-    ("right_x", "f32"),
-    ("right_y", "f32"),
-    ("right_z", "f32"),
-    ("up_x", "f32"),
-    ("up_y", "f32"),
-    ("up_z", "f32"),
-    ("forward_x", "f32"),
-    ("forward_y", "f32"),
-    ("forward_z", "f32"),
+    ("tan_half", "vec2f"),  # tan of half the field of view, across and up
+    ("position", "vec3f"),
+    ("right", "vec3f"),
+    ("up", "vec3f"),
+    ("forward", "vec3f"),
     ("max_depth", "u32"),
     ("rr_depth", "u32"),
 )
@@ -88,12 +76,9 @@ RENDER_PARAMS = Struct("RenderParams", _IMAGE_FIELDS + tuple(APERTURE_PARAM_FIEL
 POINT_PARAMS = Struct(
     "PointParams",
     (
-        ("slope_x", "f32"),
-        ("slope_y", "f32"),
+        ("slope", "vec2f"),  # the light's pinhole slopes (x/z, y/z)
         ("inv_depth", "f32"),
-        ("weight_r", "f32"),
-        ("weight_g", "f32"),
-        ("weight_b", "f32"),
+        ("weight", "vec3f"),  # rgb
         ("stream", "u32"),
         ("channel", "u32"),
         ("strata", "u32"),
@@ -243,14 +228,20 @@ def _pathtrace_pipeline(scene_source: str, adapter: AdapterChoice | None = None)
     return device.create_compute_pipeline(layout=wgpu.AutoLayoutMode.auto, compute={"module": module, "entry_point": "main"})
 
 
+@lru_cache(maxsize=1)
+def points_source() -> str:
+    """The whole point-light splatter WGSL (``points.wgsl``), every include resolved."""
+    generated = _generated(RENDER_PARAMS, POINT_PARAMS)
+    generated["interface"] = POINTS_INTERFACE.wgsl()
+    return load_shader("points.wgsl", generated)
+
+
 @lru_cache(maxsize=None)
 def _points_pipelines(adapter: AdapterChoice | None = None):
     import wgpu
 
     device = get_gpu(adapter).device
-    generated = _generated(RENDER_PARAMS, POINT_PARAMS)
-    generated["interface"] = POINTS_INTERFACE.wgsl()
-    module = device.create_shader_module(label="points", code=load_shader("points.wgsl", generated))
+    module = device.create_shader_module(label="points", code=points_source())
     return tuple(
         device.create_compute_pipeline(layout=wgpu.AutoLayoutMode.auto, compute={"module": module, "entry_point": entry})
         for entry in ("splat", "resolve")
@@ -268,28 +259,26 @@ def render_params(lens: Lens, settings: RenderSettings, pose: Pose) -> np.ndarra
     record = np.zeros((), dtype=RENDER_PARAMS.dtype)
     values = dict(
         lens.aperture.shader_params(),
-        image_width=settings.width,
-        image_height=settings.height,
+        image_size=(settings.width, settings.height),
         seed=settings.seed,
         aperture_scale=lens.aperture_scale_m,
         focus_distance=lens.focus_distance_m,
-        tan_half_x=tan_x,
-        tan_half_y=tan_y,
+        tan_half=(tan_x, tan_y),
+        position=pose.position,
+        right=right,
+        up=up,
+        forward=forward,
         max_depth=settings.max_depth,
         rr_depth=settings.rr_depth,
     )
-    for axis, name in enumerate("xyz"):
-        values[f"position_{name}"] = pose.position[axis]
-        values[f"right_{name}"] = right[axis]
-        values[f"up_{name}"] = up[axis]
-        values[f"forward_{name}"] = forward[axis]
     for key, value in values.items():
         record[key] = value
     return record
 
 
 def set_tile(record: np.ndarray, tile: tuple[int, int, int, int]) -> None:
-    record["tile_x"], record["tile_y"], record["tile_width"], record["tile_height"] = tile
+    x, y, w, h = tile
+    record["tile_origin"], record["tile_size"] = (x, y), (w, h)
 
 
 class _Ticker:
@@ -341,7 +330,7 @@ def _path_trace(scene: Scene, lens: Lens, settings: RenderSettings, progress, ad
     start = time.perf_counter()
     pipeline = _pathtrace_pipeline(scene_wgsl(scene, mirror_nee=settings.mirror_nee), adapter)
     record = render_params(lens, settings, scene.pose)
-    uniform = device.create_buffer(size=RENDER_PARAMS.dtype.itemsize, usage=wgpu.BufferUsage.UNIFORM | wgpu.BufferUsage.COPY_DST)
+    uniform = device.create_buffer(size=RENDER_PARAMS.buffer_size, usage=wgpu.BufferUsage.UNIFORM | wgpu.BufferUsage.COPY_DST)
     mask_table = _mask_table_buffer(device, lens)
     max_side = min(_TILE_GROUP_X, _TILE_GROUP_Y) * device.limits["max-compute-workgroups-per-dimension"]
     tiles = tile_plan(settings.width, settings.height, _max_tile_pixels(device, settings), max_side)
@@ -413,8 +402,7 @@ def _light_plan(scene: PointScene, lens: Lens, settings: RenderSettings) -> list
         ndc_x, ndc_y = 2.0 * image_to_aperture((light.y - 0.5, light.x - 0.5))  # the frame's centre at 0, y up
         plans.append(
             dict(
-                slope_x=float(ndc_x) * tan_x,
-                slope_y=float(ndc_y) * tan_y,
+                slope=(float(ndc_x) * tan_x, float(ndc_y) * tan_y),
                 inv_depth=0.0 if math.isinf(light.depth_m) else 1.0 / light.depth_m,
                 passes=passes,
                 stream=index,
@@ -435,8 +423,8 @@ def _splat(scene: PointScene, lens: Lens, settings: RenderSettings, progress, ad
     start = time.perf_counter()
     splat, resolve = _points_pipelines(adapter)
     record = render_params(lens, settings, Pose((0.0, 0.0, 0.0)))
-    uniform = device.create_buffer(size=RENDER_PARAMS.dtype.itemsize, usage=wgpu.BufferUsage.UNIFORM | wgpu.BufferUsage.COPY_DST)
-    light_uniform = device.create_buffer(size=POINT_PARAMS.dtype.itemsize, usage=wgpu.BufferUsage.UNIFORM | wgpu.BufferUsage.COPY_DST)
+    uniform = device.create_buffer(size=RENDER_PARAMS.buffer_size, usage=wgpu.BufferUsage.UNIFORM | wgpu.BufferUsage.COPY_DST)
+    light_uniform = device.create_buffer(size=POINT_PARAMS.buffer_size, usage=wgpu.BufferUsage.UNIFORM | wgpu.BufferUsage.COPY_DST)
     mask_table = _mask_table_buffer(device, lens)
     tiles = tile_plan(settings.width, settings.height, _max_tile_pixels(device, settings), settings.width)
     plans = _light_plan(scene, lens, settings)
@@ -469,11 +457,11 @@ def _splat(scene: PointScene, lens: Lens, settings: RenderSettings, progress, ad
             if x1 < x or x0 > x + w or y1 < y or y0 > y + h:
                 ticker.add(plan["samples"] * len(plan["passes"]))
                 continue  # this light's disc misses the tile
-            for key in ("slope_x", "slope_y", "inv_depth", "stream", "strata"):
+            for key in ("slope", "inv_depth", "stream", "strata"):
                 light_record[key] = plan[key]
             for channel, weight in plan["passes"]:
                 light_record["channel"] = channel
-                light_record["weight_r"], light_record["weight_g"], light_record["weight_b"] = weight
+                light_record["weight"] = weight
                 for first in range(0, plan["samples"], _SPLAT_CHUNK):
                     count = min(_SPLAT_CHUNK, plan["samples"] - first)
                     light_record["first"], light_record["count"] = first, count

@@ -20,20 +20,12 @@ from bokehfit.scene.geometry import BOX, MATERIAL, QUAD, SPHERE, Scene, scene_bu
 __all__ = ["wgsl_literal", "scene_wgsl"]
 
 
-def _scalar(value, kind: str) -> str:
-    if kind == "u32":
-        return f"{int(value)}u"
-    if kind == "i32":
-        return f"{int(value)}i"
-    number = float(np.float32(value))
-    if not np.isfinite(number):
-        raise InputError(f"scene values must be finite (got {value!r})")
-    return f"{number!r}f"
-
-
 def wgsl_literal(struct: Struct, record: np.void) -> str:
-    """WGSL constructor ``Name(v0, v1, ...)`` of one record of ``struct.dtype``."""
-    return f"{struct.name}(" + ", ".join(_scalar(record[f], k) for f, k in struct.fields) + ")"
+    """WGSL constructor ``Name(v0, vec3f(...), ...)`` of one record of ``struct.dtype`` (:meth:`Struct.wgsl_record`)."""
+    for name in struct.offsets:
+        if not np.isfinite(np.asarray(record[name], dtype=np.float64)).all():
+            raise InputError(f"scene values must be finite (got {struct.name}.{name} = {record[name]!r})")
+    return struct.wgsl_record(record)
 
 
 def _array(name: str, struct: Struct, records: np.ndarray, count: int) -> str:

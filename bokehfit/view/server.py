@@ -7,11 +7,12 @@ the Python renderer (the struct declarations of
 :mod:`bokehfit.scene.renderer` and :mod:`bokehfit.scene.geometry`, and the
 scene as WGSL from :func:`bokehfit.scene.wgsl.scene_wgsl`). The uniform
 record is never computed in JavaScript: ``/params.json`` returns every field
-of ``RenderParams`` by name, filled by the renderer's own code from a lens
-built by :func:`bokehfit.scene.make_lens`, and ``/config.json`` describes the
-layout (the field names and types in order, 4 bytes each, and the padded
-size) from the one :class:`bokehfit.gpu.layout.Struct`, so the page packs the
-bytes from the same description as NumPy does.
+of ``RenderParams`` by name (a vector field as a list), filled by the
+renderer's own code from a lens built by :func:`bokehfit.scene.make_lens`, and
+``/config.json`` describes the layout (each field's name, WGSL type, scalar
+type, component count and byte offset, and the padded size) from the one
+:class:`bokehfit.gpu.layout.Struct` (:meth:`~bokehfit.gpu.layout.Struct.layout_json`),
+so the page packs the bytes at the offsets NumPy uses.
 
 Routes
 ------
@@ -215,7 +216,8 @@ _STATIC = {
     "/viewer.js": ("viewer.js", "text/javascript; charset=utf-8"),
     "/style.css": ("style.css", "text/css; charset=utf-8"),
 }
-_WGSL_TYPES = ("f32", "u32", "i32")
+#: The scalar types whose components the page packs (viewer.js, ``Renderer.setValues``).
+_PAGE_SCALARS = ("f32", "u32", "i32")
 #: The methods each path serves (HEAD wherever GET); every other method answers 405.
 _READ = ("GET", "HEAD")
 _ROUTES = {
@@ -274,17 +276,14 @@ def _shader_interface(source: str) -> dict:
 
 
 def uniform_layout(struct: Struct = RENDER_PARAMS) -> dict:
-    """The uniform's layout as JSON: fields in order (4 bytes each), padded size, WGSL declaration."""
-    dtype = struct.dtype
-    fields = []
-    for name, kind in struct.fields:
-        if kind not in _WGSL_TYPES:
-            raise RuntimeError(f"{struct.name}.{name}: the page packs only 4-byte scalars (got {kind})")
-        fields.append({"name": name, "type": kind, "offset": dtype.fields[name][1]})
-    return {"name": struct.name, "fields": fields, "size_bytes": dtype.itemsize, "wgsl": struct.wgsl()}
+    """The uniform's layout as JSON (:meth:`Struct.layout_json`): fields with their types and offsets, padded size, WGSL declaration."""
+    for member in struct.members:
+        if member.scalar not in _PAGE_SCALARS:
+            raise RuntimeError(f"{struct.name}.{member.name}: the page packs only {', '.join(_PAGE_SCALARS)} components (got {member.kind})")
+    return struct.layout_json()
 
 
-def uniform_values(lens: Lens, width: int, height: int, scene: Scene) -> dict[str, float | int]:
+def uniform_values(lens: Lens, width: int, height: int, scene: Scene) -> dict[str, float | int | list]:
     """Every RenderParams field by name, as the Python renderer fills it, for the whole image as one tile.
 
     ``sample_index`` is 0 (the page sets it per sample); seed 0 and the
@@ -293,7 +292,7 @@ def uniform_values(lens: Lens, width: int, height: int, scene: Scene) -> dict[st
     settings = make_settings(width, height, 1)
     record = render_params(lens, settings, scene.pose)
     set_tile(record, (0, 0, width, height))
-    return {name: record[name].item() for name, _ in RENDER_PARAMS.fields}
+    return {name: record[name].tolist() for name, _ in RENDER_PARAMS.fields}
 
 
 @dataclass(frozen=True)

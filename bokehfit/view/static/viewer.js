@@ -3,11 +3,13 @@
 //
 // Nothing about the renderer is written twice here. From the server (bokehfit/view/server.py):
 //   /pathtrace.wgsl  the path tracer, built by the same Python code as `bokehfit render` uses;
-//   /config.json     the RenderParams layout (field names and types in order, 4 bytes each,
-//                    padded size, WGSL declaration), entry point, workgroup size, bindings,
-//                    the scene for the sketch, the shapes and the slider ranges;
-//   /params.json     every RenderParams value for the current settings, filled by the
-//                    Python renderer's own code; this file only sets sample_index;
+//   /config.json     the RenderParams layout (each field's name, WGSL type, scalar type,
+//                    components and byte offset, from bokehfit.gpu.layout; padded size, WGSL
+//                    declaration), entry point, workgroup size, bindings, the scene for the
+//                    sketch, the shapes and the slider ranges;
+//   /params.json     every RenderParams value for the current settings (a vector field as a
+//                    list), filled by the Python renderer's own code; this file only sets
+//                    sample_index;
 //   /mask            (POST) an uploaded PNG becomes the custom mask aperture's table, built by
 //                    the same Python code as `bokehfit render --mask`; /mask_table?mask=DIGEST
 //                    is that table as float32, uploaded as it is into the mask_table binding.
@@ -52,10 +54,10 @@ fn srgb_encode(c: vec3f) -> vec3f {
 
 @compute @workgroup_size(${workgroup[0]}, ${workgroup[1]})
 fn tonemap(@builtin(global_invocation_id) gid: vec3u) {
-    if (gid.x >= params.image_width || gid.y >= params.image_height) {
+    if (any(gid.xy >= params.image_size)) {
         return;
     }
-    let i = gid.y * params.image_width + gid.x;
+    let i = gid.y * params.image_size.x + gid.x;
     let a = accum[i];
     let linear = clamp(a.rgb / max(a.a, 1.0) * exposure_scale, vec3f(0.0), vec3f(1.0));
     // pack4x8unorm puts x in the lowest byte: the bytes in memory are R, G, B, A as ImageData wants.
@@ -83,7 +85,7 @@ const POINT_GAIN: f32 = ${gain};
 // The near row's 1/depth offset from the focus plane: its discs a fifth of the image wide.
 fn point_offset() -> f32 {
     let lens_diameter = 2.0 * params.aperture_scale / sqrt(PI);  // equal-area aperture, metres
-    return 0.4 * params.tan_half_x / lens_diameter;
+    return 0.4 * params.tan_half.x / lens_diameter;
 }
 
 // Light i: its pinhole slopes (x/z, y/z), 1/depth, and its disc's size over the near row's.
@@ -91,8 +93,8 @@ fn point_offset() -> f32 {
 // discs are then smaller (a lens focused close blurs lights at infinity only so much).
 fn point_light(i: u32) -> vec4f {
     let far = i < 3u;
-    let x = 0.55 * (f32(i % 3u) - 1.0) * params.tan_half_x;
-    let y = select(-0.45, 0.45, far) * params.tan_half_y;
+    let x = 0.55 * (f32(i % 3u) - 1.0) * params.tan_half.x;
+    let y = select(-0.45, 0.45, far) * params.tan_half.y;
     let offset = select(point_offset(), min(point_offset(), 1.0 / params.focus_distance), far);
     return vec4f(x, y, 1.0 / params.focus_distance + select(1.0, -1.0, far) * offset, offset / point_offset());
 }
@@ -114,8 +116,8 @@ fn point_splat(@builtin(global_invocation_id) gid: vec3u, @builtin(num_workgroup
         if (drawn.z > 0.0) {
             // the lens ray from the aperture point through the light, on the focus plane, seen from the pinhole
             let xy = pinhole_image_xy(drawn.xy * (1.0 / params.focus_distance - light.z) + light.xy);
-            if (xy.x >= 0.0 && xy.x < f32(params.image_width) && xy.y >= 0.0 && xy.y < f32(params.image_height)) {
-                atomicAdd(&point_counts[u32(xy.y) * params.image_width + u32(xy.x)], 1u);
+            if (all(xy >= vec2f(0.0)) && all(xy < vec2f(params.image_size))) {
+                atomicAdd(&point_counts[u32(xy.y) * params.image_size.x + u32(xy.x)], 1u);
             }
         }
     }
@@ -126,10 +128,10 @@ fn point_resolve(@builtin(global_invocation_id) gid: vec3u, @builtin(num_workgro
     // A near disc's area in pixels (the aperture's area, scaled by the offset into slopes, then
     // pixels): counts × area / samples is 1 inside any disc.
     let offset = point_offset();
-    let per_slope = vec2f(f32(params.image_width), f32(params.image_height)) / (2.0 * vec2f(params.tan_half_x, params.tan_half_y));
+    let per_slope = vec2f(params.image_size) / (2.0 * params.tan_half);
     let area_px = params.aperture_scale * params.aperture_scale * offset * offset * per_slope.x * per_slope.y;
     let scale = POINT_GAIN * area_px / f32(POINT_SAMPLES);
-    for (var i = gid.x; i < params.image_width * params.image_height; i += groups.x * 64u) {
+    for (var i = gid.x; i < params.image_size.x * params.image_size.y; i += groups.x * 64u) {
         let count = atomicLoad(&point_counts[i]);
         atomicStore(&point_counts[i], 0u);
         accum[i] += vec4f(vec3f(scale * f32(count)), 1.0);
@@ -298,17 +300,23 @@ class Renderer {
     }
   }
 
-  // Fill the record from the server's values, by field name and type (the served layout).
+  // Fill the record from the server's values, by field name, at the served layout's offsets:
+  // a vector field's components (a list in params.json) 4 bytes apart from its offset.
   setValues(values) {
+    const setters = { f32: "setFloat32", u32: "setUint32", i32: "setInt32" };
     for (const f of this.layout.fields) {
       const v = values[f.name];
       if (v === undefined || v === null) throw new Error(`params.json lacks RenderParams.${f.name}`);
-      if (f.type === "f32") this.record.setFloat32(f.offset, v, true);
-      else if (f.type === "u32") this.record.setUint32(f.offset, v, true);
-      else if (f.type === "i32") this.record.setInt32(f.offset, v, true);
-      else throw new Error(`RenderParams.${f.name}: unknown type ${f.type}`);
+      const components = f.components === 1 ? [v] : v;
+      if (!Array.isArray(components) || components.length !== f.components) {
+        throw new Error(`params.json: RenderParams.${f.name} is a ${f.type}, ${f.components} values`);
+      }
+      const setter = setters[f.scalar];
+      if (!setter) throw new Error(`RenderParams.${f.name}: unknown type ${f.type}`);
+      components.forEach((c, i) => this.record[setter](f.offset + 4 * i, c, true));
     }
-    if (values.image_width !== this.width || values.image_height !== this.height) {
+    const [width, height] = values.image_size;
+    if (width !== this.width || height !== this.height) {
       throw new Error("params.json is for another image size");
     }
   }
@@ -518,7 +526,7 @@ class TopDown {
     ctx.setTransform(this.ratio, 0, 0, this.ratio, 0, 0);
     ctx.clearRect(0, 0, this.cssWidth, this.cssHeight);
     ctx.font = "11px system-ui, sans-serif";
-    const tan = info ? info.values.tan_half_x : 0.5;
+    const tan = info ? info.values.tan_half[0] : 0.5;
     const wedgeX = (depth) => depth * tan * this.scale;
     const [cx, cy] = this.toScreen([0, 0]);
     const yAt = (depth) => this.originY - depth * this.scale;
