@@ -5,7 +5,7 @@ why; under CI (``CI=true``) it fails instead, so a runner without lavapipe
 cannot pass by skipping the GPU path (style.md, wgpu-py ``EXPECT_LAVAPIPE``).
 
 The harnesses build a one-line compute shader around the package's own WGSL
-(``rng.wgsl``, the generated ``shape_ids``, ``apertures.wgsl``), loaded through
+(``rng.wgsl``, the generated ``shape_ids``, ``apertures.wgsl``, ``tonemap.wgsl``), loaded through
 :func:`bokehfit.gpu.shaders.load_shader` from the installed package, so a
 ``.wgsl`` file missing from the wheel fails here too.
 
@@ -30,6 +30,7 @@ _HARNESS = """\
 // #include "rng.wgsl"
 // #include "shape_ids"
 // #include "apertures.wgsl"
+// #include "tonemap.wgsl"
 
 @group(0) @binding(0) var<storage, read> inputs: array<{in_type}>;
 @group(0) @binding(1) var<storage, read_write> outputs: array<{out_type}>;
@@ -50,6 +51,7 @@ _TYPES = {
     "u32": (np.uint32, 1),
     "f32": (np.float32, 1),
     "vec2f": (np.float32, 2),
+    "vec4f": (np.float32, 4),
     "vec4u": (np.uint32, 4),
 }
 

@@ -138,11 +138,13 @@ def _compiled_sources() -> dict[str, str]:
     from bokehfit.scene import cornell_box
     from bokehfit.scene.renderer import pathtrace_source, points_source
     from bokehfit.scene.wgsl import scene_wgsl
+    from bokehfit.view.server import display_source
 
     return {
         "pathtrace.wgsl": pathtrace_source(scene_wgsl(cornell_box())),
         "points.wgsl": points_source(),
         "kernel_mc.wgsl": kernel_mc_source(),
+        "display.wgsl": display_source(),
     }
 
 

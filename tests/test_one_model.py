@@ -338,8 +338,14 @@ HAND_WRITTEN_INTERFACE = (
 def _interfaces():
     from bokehfit.kernels.mc import KERNEL_INTERFACE
     from bokehfit.scene.renderer import PATHTRACE_INTERFACE, POINTS_INTERFACE
+    from bokehfit.view.server import DISPLAY_INTERFACE
 
-    return {"kernel_mc.wgsl": KERNEL_INTERFACE, "pathtrace.wgsl": PATHTRACE_INTERFACE, "points.wgsl": POINTS_INTERFACE}
+    return {
+        "kernel_mc.wgsl": KERNEL_INTERFACE,
+        "pathtrace.wgsl": PATHTRACE_INTERFACE,
+        "points.wgsl": POINTS_INTERFACE,
+        "display.wgsl": DISPLAY_INTERFACE,
+    }
 
 
 def test_no_shader_file_writes_bindings_or_workgroup_sizes():
@@ -351,7 +357,7 @@ def test_no_shader_file_writes_bindings_or_workgroup_sizes():
     assert not offences, "\n".join(offences)
 
 
-@pytest.mark.parametrize("filename", ["kernel_mc.wgsl", "pathtrace.wgsl", "points.wgsl"])
+@pytest.mark.parametrize("filename", ["kernel_mc.wgsl", "pathtrace.wgsl", "points.wgsl", "display.wgsl"])
 def test_every_dispatched_shader_takes_its_interface(filename):
     """Each dispatched shader includes the generated interface: without it, it cannot be built."""
     from bokehfit.gpu.shaders import shader_source

@@ -115,6 +115,9 @@ def test_uniform_layout_is_render_params(server):
     assert layout["size_bytes"] == RENDER_PARAMS.dtype.itemsize == RENDER_PARAMS.buffer_size
     assert layout["wgsl"] == RENDER_PARAMS.wgsl()
     assert config["shader"]["entry_point"] == "main" and config["shader"]["workgroup_size"] == [8, 8, 1]
+    display = config["display"]
+    assert display["url"] == "/display.wgsl" and display["entry_point"] == "display" and display["workgroup_size"] == [8, 8, 1]
+    assert set(display["bindings"]) == {"params", "accum", "rgba"}
     assert [s["name"] for s in config["shapes"]] == list(SHAPES)
 
 
@@ -134,6 +137,16 @@ def test_shader_is_the_package_wgsl_with_includes_resolved(server):
     assert RENDER_PARAMS.wgsl() in source
     assert scene_wgsl(cornell_box()) in source
     assert source.count("fn camera_ray(") == 1 and source.count("struct RenderParams") == 1
+
+
+def test_display_pass_is_the_package_tone_map(server):
+    status, kind, body = get(server, "/display.wgsl")
+    assert status == 200 and kind.startswith("text/wgsl")
+    source = body.decode("utf-8")
+    assert "#include" not in source and RENDER_PARAMS.wgsl() in source
+    assert shader_source("tonemap.wgsl").strip() in source and source.count("fn tone_map_srgb8(") == 1
+    page = get(server, "/viewer.js")[2].decode("utf-8")
+    assert "fn srgb_encode" not in page and "fn tone_map" not in page  # no second tone map in the page
 
 
 def f32(value) -> float:
@@ -615,6 +628,30 @@ def test_browser_traces_the_same_paths_as_python(browser, server, gpu):
     same = (np.abs(browser_image - python_image).max(axis=-1) <= SAME_PIXEL_TOLERANCE).mean()
     assert same >= MIN_SAME_PIXEL_FRACTION, f"only {same:.0%} of the pixels agree with the Python renderer"
     np.testing.assert_allclose(browser_image.mean(axis=(0, 1)), python_image.mean(axis=(0, 1)), rtol=0.05)
+
+
+def test_the_page_shows_its_frame_through_the_package_tone_map(browser, server):
+    """The canvas holds tone_map_srgb8 (NumPy, as `bokehfit render` writes PNGs) of the page's own linear frame."""
+    from bokehfit.scene import tone_map_srgb8
+
+    page = open_page(browser, server, "max_spp=4&shape=hexagon&fstop=1.4")
+    try:
+        page.wait_for_function("window.bokehfitViewer.spp === 4", timeout=PAGE_TIMEOUT_MS)
+        frame = page.evaluate("window.bokehfitViewer.readImage()")
+        shown = page.evaluate(
+            "(() => { const c = document.getElementById('render');"
+            " return Array.from(c.getContext('2d').getImageData(0, 0, c.width, c.height).data); })()"
+        )
+        assert page.errors == []
+    finally:
+        page.close()
+    height, width = frame["height"], frame["width"]
+    linear = np.asarray(frame["rgb"], dtype=np.float32).reshape(height, width, 3)
+    rgba = np.asarray(shown, dtype=np.uint8).reshape(height, width, 4)
+    assert (rgba[..., 3] == 255).all() and linear.max() > 0.05
+    # The WGSL twin rounds in float32 (here on SwiftShader): one code value, at rounding boundaries only.
+    diff = rgba[..., :3].astype(int) - tone_map_srgb8(linear).astype(int)
+    assert np.abs(diff).max() <= 1 and np.count_nonzero(diff) <= 1e-3 * diff.size + 1
 
 
 def test_uploaded_mask_traces_the_same_paths_as_python(browser, server, gpu, tmp_path):

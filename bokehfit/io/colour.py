@@ -108,7 +108,7 @@ def srgb_decode(encoded) -> np.ndarray:
 
 
 def srgb_encode(linear) -> np.ndarray:
-    """sRGB encoding in [0, 1] of linear values in [0, 1] (IEC 61966-2-1), float64."""
+    """sRGB encoding in [0, 1] of linear values in [0, 1] (IEC 61966-2-1), float64 (WGSL twin: ``shaders/tonemap.wgsl``)."""
     x = np.asarray(linear, dtype=np.float64)
     return np.where(x <= 0.0031308, x * 12.92, 1.055 * np.maximum(x, 0.0) ** (1.0 / 2.4) - 0.055)
 

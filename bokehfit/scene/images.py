@@ -23,6 +23,11 @@ _BLOCK_ROWS = 64
 def tone_map_srgb8(image: np.ndarray, exposure_ev: float = 0.0, *, bgr: bool = False) -> np.ndarray:
     """uint8 sRGB of a linear (H, W, 3) image: scaled by 2^exposure_ev, clipped to [0, 1], sRGB-encoded.
 
+    NumPy twin of WGSL ``tone_map_srgb8`` (``shaders/tonemap.wgsl``), through which the
+    viewer's page shows its frames: the clipped value is rounded to a 16-bit level (the
+    index of :func:`~bokehfit.io.colour.srgb_display_lut`), encoded and rounded to 8 bits.
+    NaN counts as 0 and +inf as 1 (the WGSL twin leaves non-finite input to the adapter).
+
     Done in blocks of rows into the one uint8 result (3 bytes a pixel), so that a
     16384² render needs no float64 copies of itself; ``bgr`` orders the channels as
     OpenCV writes them.

@@ -20,8 +20,12 @@ Routes
     The page (package data of :mod:`bokehfit.view`).
 ``GET /pathtrace.wgsl``
     The path tracer's WGSL, every include resolved.
+``GET /display.wgsl``
+    The page's display pass (``shaders/display.wgsl``): the accumulation buffer
+    through ``tone_map_srgb8`` of ``shaders/tonemap.wgsl``, the WGSL twin of the
+    tone map that ``bokehfit render`` writes PNGs with, into RGBA8.
 ``GET /config.json``
-    Uniform layout, entry point and workgroup size (read from the WGSL),
+    Uniform layout, entry points and workgroup sizes (read from the WGSL),
     scene sketch (walls, block, balls, camera), lens constants, shapes,
     slider ranges and the default settings.
 ``GET /params.json?shape=&angle=&fstop=&focus=&blades=&aspect=&width=&height=&mask=``
@@ -102,7 +106,9 @@ from bokehfit.apertures import SHAPES, Aperture, MaskTable, make_aperture
 from bokehfit.apertures.mask import MAX_MASK_SIDE, decode_mask
 from bokehfit.apertures.shapes import DEFAULT_SLIT_ASPECT, MAX_BLADES
 from bokehfit.errors import InputError, check_finite
+from bokehfit.gpu.compute import Binding, ComputeInterface
 from bokehfit.gpu.layout import Struct
+from bokehfit.gpu.shaders import load_shader
 from bokehfit.scene import SCENES, Lens, Scene, build_scene, make_lens, make_settings
 from bokehfit.scene.camera import FOCAL_LENGTH_MM, FSTOP_RANGE, MAX_IMAGE_SIDE, SENSOR_WIDTH_MM
 from bokehfit.scene.renderer import PATHTRACE_INTERFACE, RENDER_PARAMS, render_params, set_tile
@@ -113,11 +119,13 @@ from bokehfit.view.transport import Limits, Transport, log_line
 
 __all__ = [
     "COC_DIVISOR",
+    "DISPLAY_INTERFACE",
     "DepthOfField",
     "JsonShape",
     "MaskStore",
     "ViewerServer",
     "depth_of_field",
+    "display_source",
     "json_depth",
     "json_shape",
     "png_pixels_only",
@@ -223,6 +231,7 @@ _READ = ("GET", "HEAD")
 _ROUTES = {
     **{path: _READ for path in _STATIC},
     "/pathtrace.wgsl": _READ,
+    "/display.wgsl": _READ,
     "/config.json": _READ,
     "/params.json": _READ,
     "/favicon.ico": _READ,
@@ -257,21 +266,39 @@ def pathtrace_source(scene: Scene, *, mirror_nee: bool = False) -> str:
     return renderer_source(scene_wgsl(scene, mirror_nee=mirror_nee))
 
 
-def _shader_interface(source: str) -> dict:
-    """Entry point and bindings of the compute shader, read from its text; its workgroup size (PATHTRACE_INTERFACE)."""
+#: Bind group 0 and workgroup size of the page's display pass (``shaders/display.wgsl``),
+#: whose workgroups tile the image as the path tracer's do.
+DISPLAY_INTERFACE = ComputeInterface(
+    (
+        Binding("params", "uniform", "RenderParams"),
+        Binding("accum", "storage, read", "array<vec4f>"),
+        Binding("rgba", "storage, read_write", "array<u32>"),
+    ),
+    workgroup_size=PATHTRACE_INTERFACE.workgroup_size,
+)
+
+
+@lru_cache(maxsize=1)
+def display_source() -> str:
+    """The WGSL of the page's display pass, every include resolved (``/display.wgsl``)."""
+    return load_shader("display.wgsl", {"RenderParams": RENDER_PARAMS.wgsl(), "interface": DISPLAY_INTERFACE.wgsl()})
+
+
+def _shader_interface(source: str, interface: ComputeInterface = PATHTRACE_INTERFACE, filename: str = "pathtrace.wgsl") -> dict:
+    """Entry point and bindings of the compute shader, read from its text; its workgroup size (``interface``)."""
     entry = re.search(r"@compute\s+@workgroup_size\([^)]*\)\s*fn\s+(\w+)", source)
     if entry is None:
-        raise RuntimeError("pathtrace.wgsl has no @compute entry point with a @workgroup_size")
-    size = [*PATHTRACE_INTERFACE.workgroup_size, 1, 1][:3]
+        raise RuntimeError(f"{filename} has no @compute entry point with a @workgroup_size")
+    size = [*interface.workgroup_size, 1, 1][:3]
     bindings = {
         name: {"group": int(group), "binding": int(binding), "space": space}
         for group, binding, space, name in re.findall(
             r"@group\((\d+)\)\s*@binding\((\d+)\)\s*var<\s*(\w+)[^>]*>\s*(\w+)\s*:", source
         )
     }
-    for name in ("params", "accum"):
-        if name not in bindings:
-            raise RuntimeError(f"pathtrace.wgsl declares no binding {name!r}")
+    for binding in ("params", "accum"):
+        if binding not in bindings:
+            raise RuntimeError(f"{filename} declares no binding {binding!r}")
     return {"entry_point": entry.group(1), "workgroup_size": size, "bindings": bindings}
 
 
@@ -540,6 +567,7 @@ def viewer_config(scene_name: str = "cornell", size: tuple[int, int] = DEFAULT_S
     return {
         "bokehfit_version": __version__,
         "shader": {"url": "/pathtrace.wgsl", **_shader_interface(source)},
+        "display": {"url": "/display.wgsl", **_shader_interface(display_source(), DISPLAY_INTERFACE, "display.wgsl")},
         "uniform": uniform_layout(RENDER_PARAMS),
         "scene": _scene_sketch(scene),
         "lens": {"focal_length_mm": FOCAL_LENGTH_MM, "sensor_width_mm": SENSOR_WIDTH_MM, "size_convention": "equal-area"},
@@ -1209,6 +1237,8 @@ class _Handler(BaseHTTPRequestHandler):
                 return self._send(HTTPStatus.OK, page, content_type)
             if url.path == "/pathtrace.wgsl":
                 return self._send(HTTPStatus.OK, _pathtrace_bytes(self.server.scene_name), "text/wgsl; charset=utf-8")
+            if url.path == "/display.wgsl":
+                return self._send(HTTPStatus.OK, display_source().encode("utf-8"), "text/wgsl; charset=utf-8")
             if url.path == "/config.json":
                 return self._json(HTTPStatus.OK, viewer_config(self.server.scene_name, self.server.size))
             if url.path == "/params.json":
@@ -1269,8 +1299,9 @@ class ViewerServer:
         if scene not in SCENES or not isinstance(build_scene(scene), Scene):
             raise InputError(f"the viewer path-traces the scene 'cornell' (got {scene!r})")
         make_settings(size[0], size[1], 1)  # validates the size
-        # Build the shader now: a broken install fails here, not in the browser.
+        # Build the shaders now: a broken install fails here, not in the browser.
         _pathtrace_source_cached(scene, False)
+        display_source()
         self._listener = socket.create_server(("127.0.0.1", port), backlog=LISTEN_BACKLOG)
         self._site = _Site(self.port, scene, tuple(size), verbose)
         limits = Limits(

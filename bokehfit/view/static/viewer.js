@@ -10,13 +10,16 @@
 //   /params.json     every RenderParams value for the current settings (a vector field as a
 //                    list), filled by the Python renderer's own code; this file only sets
 //                    sample_index;
+//   /display.wgsl    the display pass (shaders/display.wgsl): the accumulation buffer (sum of
+//                    samples in rgb, count in a) through tone_map_srgb8 of shaders/tonemap.wgsl,
+//                    the WGSL twin of the tone map `bokehfit render --out x.png` writes with
+//                    (scale by 2^EV, clip to [0, 1], sRGB), into 8-bit RGBA, which is read back
+//                    and put on the #render canvas;
 //   /mask            (POST) an uploaded PNG becomes the custom mask aperture's table, built by
 //                    the same Python code as `bokehfit render --mask`; /mask_table?mask=DIGEST
 //                    is that table as float32, uploaded as it is into the mask_table binding.
-// The one shader written here is TONEMAP_WGSL below: a compute pass that tone-maps the
-// accumulation buffer (sum of samples in rgb, count in a) as `bokehfit render --out x.png`
-// does (scale by 2^EV, clip to [0, 1], sRGB) into 8-bit RGBA, which is read back and put on
-// the #render canvas. A 2-D canvas, not a WebGPU one: headless Chromium on SwiftShader with
+// The one shader written here is POINTS_WGSL below, the point-light view's two entry points.
+// The display goes to a 2-D canvas, not a WebGPU one: headless Chromium on SwiftShader with
 // the usual flags has no shared-image backing for a WebGPU canvas and loses the device at its
 // first present, which would stop the render; one read-back a batch (1 MiB at 512×512) works
 // everywhere.
@@ -37,33 +40,6 @@ const BATCH_TARGET_MS = 60;
 const MAX_BATCH = 32;
 // Window of the samples-per-second estimate (ms).
 const RATE_WINDOW_MS = 3000;
-
-const TONEMAP_WGSL = (uniformStruct, workgroup) => `
-// tonemap: the path tracer's accumulation buffer as 8-bit sRGB RGBA (viewer.js).
-${uniformStruct}
-@group(0) @binding(0) var<uniform> params: RenderParams;
-@group(0) @binding(1) var<storage, read> accum: array<vec4f>;
-@group(0) @binding(2) var<storage, read_write> rgba: array<u32>;
-override exposure_scale: f32 = 1.0;
-
-fn srgb_encode(c: vec3f) -> vec3f {
-    let low = 12.92 * c;
-    let high = 1.055 * pow(c, vec3f(1.0 / 2.4)) - 0.055;
-    return select(high, low, c <= vec3f(0.0031308));
-}
-
-@compute @workgroup_size(${workgroup[0]}, ${workgroup[1]})
-fn tonemap(@builtin(global_invocation_id) gid: vec3u) {
-    if (any(gid.xy >= params.image_size)) {
-        return;
-    }
-    let i = gid.y * params.image_size.x + gid.x;
-    let a = accum[i];
-    let linear = clamp(a.rgb / max(a.a, 1.0) * exposure_scale, vec3f(0.0), vec3f(1.0));
-    // pack4x8unorm puts x in the lowest byte: the bytes in memory are R, G, B, A as ImageData wants.
-    rgba[i] = pack4x8unorm(vec4f(srgb_encode(linear), 1.0));
-}
-`;
 
 // Aperture samples per point light and batch, and the most workgroups of one point-light dispatch.
 const POINT_SAMPLES = 65536;
@@ -236,12 +212,15 @@ class Renderer {
     [this.pointSplat, this.pointResolve] = await Promise.all([pointsPipeline("point_splat"), pointsPipeline("point_resolve")]);
     this.scene = "cornell";
 
-    const tonemapModule = device.createShaderModule({ label: "tonemap", code: TONEMAP_WGSL(this.layout.wgsl, config.shader.workgroup_size) });
-    await this.checkCompilation(tonemapModule, "tonemap");
-    this.tonemap = await device.createComputePipelineAsync({
-      label: "tonemap",
+    const display = config.display;
+    const [dx, dy] = display.workgroup_size;
+    this.displayGroups = [Math.ceil(width / dx), Math.ceil(height / dy)];
+    const displayModule = device.createShaderModule({ label: "display", code: await (await fetch(display.url)).text() });
+    await this.checkCompilation(displayModule, "display.wgsl");
+    this.display = await device.createComputePipelineAsync({
+      label: "display",
       layout: "auto",
-      compute: { module: tonemapModule, entryPoint: "tonemap", constants: { exposure_scale: Math.pow(2, config.exposure_ev) } },
+      compute: { module: displayModule, entryPoint: display.entry_point, constants: { exposure_ev: config.exposure_ev } },
     });
     this.canvas.width = width;
     this.canvas.height = height;
@@ -259,12 +238,13 @@ class Renderer {
     this.setMaskTable(new Float32Array(1));
     this.rgba = device.createBuffer({ label: "rgba", size: 4 * width * height, usage: GPUBufferUsage.STORAGE | GPUBufferUsage.COPY_SRC });
     this.staging = device.createBuffer({ label: "staging", size: 4 * width * height, usage: GPUBufferUsage.MAP_READ | GPUBufferUsage.COPY_DST });
-    this.tonemapGroup = device.createBindGroup({
-      layout: this.tonemap.getBindGroupLayout(0),
+    const d = display.bindings;
+    this.displayGroup = device.createBindGroup({
+      layout: this.display.getBindGroupLayout(d.params.group),
       entries: [
-        { binding: 0, resource: { buffer: this.uniform } },
-        { binding: 1, resource: { buffer: this.accum } },
-        { binding: 2, resource: { buffer: this.rgba } },
+        { binding: d.params.binding, resource: { buffer: this.uniform } },
+        { binding: d.accum.binding, resource: { buffer: this.accum } },
+        { binding: d.rgba.binding, resource: { buffer: this.rgba } },
       ],
     });
   }
@@ -357,9 +337,9 @@ class Renderer {
     const { device, width, height } = this;
     const encoder = device.createCommandEncoder();
     const pass = encoder.beginComputePass();
-    pass.setPipeline(this.tonemap);
-    pass.setBindGroup(0, this.tonemapGroup);
-    pass.dispatchWorkgroups(this.groups[0], this.groups[1]);
+    pass.setPipeline(this.display);
+    pass.setBindGroup(this.config.display.bindings.params.group, this.displayGroup);
+    pass.dispatchWorkgroups(this.displayGroups[0], this.displayGroups[1]);
     pass.end();
     encoder.copyBufferToBuffer(this.rgba, 0, this.staging, 0, 4 * width * height);
     device.queue.submit([encoder.finish()]);
