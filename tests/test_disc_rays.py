@@ -167,3 +167,15 @@ def test_a_disc_cut_by_the_frame_is_seen_where_the_frame_does_not_cut_it():
     seen = m.outline_xy[m.outline_reliable]
     assert seen[:, 0].min() > 0.5
     assert np.abs(np.hypot(*(seen - np.array(centre)).T) - diameter / 2).max() < 1.5
+
+
+@pytest.mark.parametrize("kind", ["gaussian", "cone"])
+def test_the_search_finds_no_disc_in_a_glow(kind):
+    """Nor does the photo search (blobs, edge circles and their measurement along rays)."""
+    from bokehfit.discs import find_discs
+
+    yy, xx = np.mgrid[0:300, 0:300]
+    distance = np.hypot(xx - 150.0, yy - 150.0)
+    glow = np.exp(-0.5 * (distance / 40.0) ** 2) if kind == "gaussian" else np.clip(1 - distance / 90.0, 0, None)
+    image = (0.1 + 0.3 * glow + np.random.default_rng(1).normal(0, 0.003, glow.shape)).astype(np.float32)
+    assert not [d for d in find_discs(image, None, min_diameter_px=8).discs if d.usable]

@@ -82,6 +82,14 @@ MAX_CLUSTER_CANDIDATES = MAX_CANDIDATES // 20
 #: the ratio of their sizes within these bounds.
 SAME_DISC_CENTRE_REL = 0.25
 SAME_DISC_SIZE_RATIOS = (0.75, 1.33)
+#: A circle through edges found by the search itself (no person vouching for it) is measured along
+#: rays only where the contour found too little contrast there: where the contour finds no outline or a
+#: soft one, the rays' closed path in a photo's own search took merged glows and lit texture for discs
+#: (the reference photos' labels: 5 of 8 such discs used by the fit were not discs).
+RAYS_AFTER = ("faint",)
+#: ... and from this size (px): the step's sides are then 5 px or more (under 64 px, at their 3-px floor,
+#: JPEG's 8-px blocks and texture make steps as clear as a small faint disc's).
+RAYS_MIN_DIAMETER_PX = 64.0
 #: Most circles through edges measured per photo (module bokehfit.discs.circles; the clearest first).
 MAX_CIRCLES = MAX_CANDIDATES // 10
 #: A disc whose reliable share of the outline reaches this is seen whole (a stray point or two
@@ -474,7 +482,8 @@ def _circle_discs(luminance, clipped, measurements, min_diameter_px, max_diamete
                                      for j in known.query_ball_point(xy, SAME_DISC_CENTRE_REL * diameter)):
             continue  # the blob search measured it (a disc, or not one)
         measured += 1
-        m = _measure_place(luminance, clipped, xy, diameter, min_diameter_px)
+        m = _measure_place(luminance, clipped, xy, diameter, min_diameter_px,
+                           rays_after=RAYS_AFTER if diameter >= RAYS_MIN_DIAMETER_PX else ())
         reason = m if isinstance(m, str) else m.reason
         if reason is None and not min_diameter_px <= m.diameter_px <= max_diameter_px:
             reason = "too large"
@@ -526,7 +535,8 @@ def measure_discs_at(
     return _discs_of(measurements, len(places), rejected, start, [], rejections, None)
 
 
-def _measure_place(luminance, clipped, xy, diameter: float, min_diameter_px: float = 1.0) -> Measurement | str:
+def _measure_place(luminance, clipped, xy, diameter: float, min_diameter_px: float = 1.0,
+                   rays_after: tuple[str, ...] | None = None) -> Measurement | str:
     """The disc at a place and about a size (a person's pick, a circle through an edge): measured as a
     candidate there; where it overlaps others, the part of its cluster closest to the place. A reason
     where no outline of about that size can be drawn there. The measurement's own ``reason`` (its
@@ -536,6 +546,8 @@ def _measure_place(luminance, clipped, xy, diameter: float, min_diameter_px: flo
         return "outside the photo"
     m = _contour_at_place(luminance, clipped, xy, diameter, min_diameter_px)
     if isinstance(m, Measurement) and m.reason is None:
+        return m
+    if rays_after is not None and (m if isinstance(m, str) else m.reason) not in rays_after:
         return m
     # Where one level does not outline it (a faint disc over haze and its neighbours' light, discs
     # that overlap), the disc's own edge along rays from the place may.
@@ -570,15 +582,17 @@ def _contour_at_place(luminance, clipped, xy, diameter: float, min_diameter_px: 
 
 def _by_own_steps(luminance, clipped, measurements: list[Measurement], min_diameter_px: float) -> list[Measurement]:
     """The measurements, those whose contour runs into other discs' light over more than MIN_FIT_SEEN
-    of it measured again by their own step along rays (:func:`bokehfit.discs.rays.measure_rays`), where
+    of it (but shows MIN_OUTLINE_SEEN of it as its own: a disc, not a merged glow) measured again by
+    their own step along rays (:func:`bokehfit.discs.rays.measure_rays`), where
     that finds the same disc and sees more of its edge (light adds: the step of a disc's edge is its
     own inside a neighbour's light, where a contour through the sum of both is neither's)."""
     measurements = _distinct_measurements(measurements)
     own, _ = _own_outlines(measurements)
     again = list(measurements)
     for i, (m, reliable) in enumerate(zip(measurements, own)):
-        if m.own_step or not len(reliable) or reliable.mean() >= MIN_FIT_SEEN or m.diameter_px < RESOLVABLE_PX:
-            continue
+        if m.own_step or not len(reliable) or not MIN_OUTLINE_SEEN <= reliable.mean() < MIN_FIT_SEEN \
+                or m.diameter_px < RESOLVABLE_PX:
+            continue  # only a disc whose contour shows at least half its outline as its own
         stepped = measure_rays(luminance, clipped, m.center_xy, m.diameter_px, MIN_NOISE, min_diameter_px)
         if isinstance(stepped, Measurement) and stepped.reason is None and _near_place(stepped, m.center_xy, m.diameter_px) \
                 and _same_size(stepped.diameter_px, m.diameter_px) and stepped.outline_reliable.mean() > reliable.mean():
@@ -597,7 +611,7 @@ def _discs_of(measurements, found, rejected, start, notes, rejections, max_discs
     discs = []
     for i, (m, overlap, reliable, cluster) in enumerate(zip(measurements, overlaps, own, clusters)):
         seen = float(reliable.mean()) if len(reliable) else 0.0
-        if seen < FULL_OUTLINE_SEEN:
+        if seen < FULL_OUTLINE_SEEN or cluster is not None:  # in a cluster its light is not all its own
             evidence = "partial"
         elif m.saturated or m.ring or m.bright_centre:
             evidence = "edge"
