@@ -82,6 +82,11 @@ MIN_ACCEPTABLE_IOU = 0.6
 #: ... and sure when, besides a clear BIC margin, they match this well with at least MIN_SURE_DISCS discs.
 MIN_SURE_IOU = 0.85
 MIN_SURE_DISCS = 3
+#: ... and the discs are not both small and faint: under SMALL_DISC_PX (median) and standing less than
+#: FAINT_CONTRAST_REL of their background above it (median), an outline of a few hundred pixels is set
+#: by a few code values of the photo's tone curve, grain and compression as much as by the aperture.
+SMALL_DISC_PX = 64.0
+FAINT_CONTRAST_REL = 0.5
 #: ... and the discs' outlines follow the shape: median radial misfit (in equal-area radii) at most
 #: :data:`bokehfit.fit.REGULAR_OUTLINE_MISFIT`, the fit's "regular" outline.
 #: The kernel is drawn at the fitted angle, so each disc's best alignment with
@@ -487,6 +492,17 @@ def distance_text(distance_m: float | None, focus_distance_m: float | None = Non
     return f"{distance_m:.3g} m"
 
 
+def _small_and_faint(fit: ApertureFit) -> tuple[float, float] | None:
+    """The fitted discs' median diameter and median contrast over their background (a share of it), where
+    both are under SMALL_DISC_PX and FAINT_CONTRAST_REL; else None."""
+    discs = [item.disc for item in fit.disc_fits]
+    if not discs:
+        return None
+    diameter = float(np.median([d.diameter_px for d in discs]))
+    contrast = float(np.median([(d.plateau - d.background) / max(d.background, 1e-6) for d in discs]))
+    return (diameter, contrast) if diameter < SMALL_DISC_PX and contrast < FAINT_CONTRAST_REL else None
+
+
 def short_doubts(fit: ApertureFit, metrics: dict[str, float | None]) -> list[str]:
     """The doubts of :func:`judge` in a few words each, most telling first (for the verdict's first sentence)."""
     words = []
@@ -500,6 +516,8 @@ def short_doubts(fit: ApertureFit, metrics: dict[str, float | None]) -> list[str
     iou = metrics.get("iou")
     if iou is not None and iou < MIN_SURE_IOU:
         words.append("the discs match it only loosely")
+    if _small_and_faint(fit):
+        words.append("the discs are small and faint")
     if fit.notes:
         words.append("a better-fitting shape was set aside (see the notes)")
     return words
@@ -951,6 +969,11 @@ def judge(fit: ApertureFit, metrics: dict[str, float | None]) -> tuple[list[str]
     iou = metrics.get("iou")
     if iou is not None and iou < MIN_SURE_IOU:
         doubts.append(f"the discs match the kernel only loosely (median overlap IoU {iou:.2f}, {MIN_SURE_IOU} for a sure fit)")
+    faint = _small_and_faint(fit)
+    if faint:
+        doubts.append(f"the discs are small and faint (median {faint[0]:.0f} px, {faint[1]:.0%} above their background;"
+                      f" {SMALL_DISC_PX:.0f} px or {FAINT_CONTRAST_REL:.0%} for a sure fit): their outlines follow the"
+                      " photo's tone curve, grain and compression as much as the aperture")
     rejection = None
     if iou is not None and iou < MIN_ACCEPTABLE_IOU:
         rejection = (
