@@ -29,7 +29,7 @@ from photo_factory import (
     write_tiff,
 )
 
-import bokehfit.io.photo as photo_module
+import bokehfit.io.linear as linear_module
 from bokehfit.errors import InputError
 from bokehfit.io import MIN_SIDE_PX, Exif, load_photo
 
@@ -97,17 +97,17 @@ def test_srgb_jpeg_round_trip_within_two_codes(tmp_path):
 
 
 def test_photo_arrays_on_plain_pages_are_the_same(tmp_path, monkeypatch):
-    """Large photo arrays are mapped without transparent huge pages (photo._photo_array); a photo
+    """Large photo arrays are mapped without transparent huge pages (linear.photo_array); a photo
     read so has the same pixels, luminance and clipped mask as one read on NumPy's own arrays."""
     path = write_jpeg(tmp_path / "levels.jpg", grey_patches(LEVELS))
-    monkeypatch.setattr(photo_module, "PLAIN_PAGES_BYTES", 1 << 62)  # NumPy's arrays
+    monkeypatch.setattr(linear_module, "PLAIN_PAGES_BYTES", 1 << 62)  # NumPy's arrays
     plain = load_photo(path)
-    monkeypatch.setattr(photo_module, "PLAIN_PAGES_BYTES", 0)  # every array mapped by _photo_array
+    monkeypatch.setattr(linear_module, "PLAIN_PAGES_BYTES", 0)  # every array mapped by photo_array
     mapped = load_photo(path)
     for name in ("luminance", "clipped", "display"):
         a, b = getattr(plain, name), getattr(mapped, name)
         assert a.dtype == b.dtype and np.array_equal(a, b) and not b.flags.writeable, name
-    fresh = photo_module._photo_array((3, 5), np.float32)
+    fresh = linear_module.photo_array((3, 5), np.float32)
     fresh[...] = 7.0  # writable until frozen
     assert fresh.shape == (3, 5) and fresh.dtype == np.float32 and float(fresh.sum()) == 105.0
 
@@ -204,7 +204,7 @@ def test_luminance_weights_on_pure_colours(tmp_path):
 def test_colour_jpeg_display_is_the_decoded_rgb_over_many_blocks(tmp_path):
     """The display is the decoded image with its channels put in RGB order, block by block:
     the image is taller than several blocks, and every row is swapped exactly once."""
-    codes = random_codes((4 * photo_module._BLOCK_ROWS + 7, 48, 3), 8, seed=31)
+    codes = random_codes((4 * linear_module.BLOCK_ROWS + 7, 48, 3), 8, seed=31)
     path = write_jpeg(tmp_path / "tall.jpg", codes)
     photo = load_photo(path)
     decoded = cv2.imread(str(path), cv2.IMREAD_UNCHANGED | cv2.IMREAD_IGNORE_ORIENTATION)
@@ -576,7 +576,7 @@ def test_progress_bar_only_when_asked_and_big(tmp_path, monkeypatch, capsys):
     path = write_png(tmp_path / "p.png", random_codes((300, 300, 3), 8, 51))
     load_photo(path, progress=True)  # 90 000 px: below the threshold
     assert capsys.readouterr().err == ""
-    monkeypatch.setattr(photo_module, "PROGRESS_MIN_PIXELS", 10_000)
+    monkeypatch.setattr(linear_module, "PROGRESS_MIN_PIXELS", 10_000)
     load_photo(path, progress=False)
     assert capsys.readouterr() == ("", "")
     load_photo(path, progress=True)
