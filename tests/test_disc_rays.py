@@ -179,24 +179,3 @@ def test_the_search_finds_no_disc_in_a_glow(kind):
     glow = np.exp(-0.5 * (distance / 40.0) ** 2) if kind == "gaussian" else np.clip(1 - distance / 90.0, 0, None)
     image = (0.1 + 0.3 * glow + np.random.default_rng(1).normal(0, 0.003, glow.shape)).astype(np.float32)
     assert not [d for d in find_discs(image, None, min_diameter_px=8).discs if d.usable]
-
-
-def test_real_overlapping_discs_keep_their_size_where_a_neighbours_rim_dents_the_path(reference_photo):
-    """Photo 14: large discs of a string of lights, each overlapped by the next (a bright crescent
-    where light adds) or partly lost in the background. An aperture's image is convex, so the path's
-    dents along a neighbour's rim are not the disc's edge: measured at the person's places, the faint
-    and the occluded disc come out at the person's size (they came out 6 % and 9 % small when the
-    dents were kept)."""
-    from photo_factory import reference_labels
-
-    from bokehfit.io import load_photo
-
-    name = "14_fallen-leaf_canon-70d-ef50.jpg"
-    _, labels = reference_labels(name)
-    photo = load_photo(reference_photo(name))
-    for label in labels.usable:
-        if label.kind not in ("faint", "occluded"):
-            continue
-        m = measure_rays(photo.luminance, photo.clipped, label.center_xy, label.diameter_px, MIN_NOISE, 8.0)
-        assert not isinstance(m, str) and m.reason is None, (label, m)
-        assert m.diameter_px == pytest.approx(label.diameter_px, rel=0.04), (label, m.diameter_px)

@@ -27,11 +27,8 @@ disc's own edge where its step is positive, stands ``MIN_STEP_SIGMA`` of its
 noise out of the pixel noise (estimated from the crop's finest scale, where
 smooth neighbours and haze add nothing) and is within ``STEP_RATIO`` of the
 median step: a ray that runs into an occluder, a brighter neighbour or the
-frame is marked not seen, and so is one off the smooth curve through the
-others or denting their convex hull (an aperture's image is convex: a dent
-follows another light's rim inside the disc, where light adds); the disc's
-edge is looked for again near the curve or the hull on those rays, and the
-outline where it is not found is interpolated from the seen rays. The disc is then judged as every measured disc is
+frame is marked not seen, and the outline there is interpolated from the
+seen rays. The disc is then judged as every measured disc is
 (:func:`bokehfit.discs.measure.describe`): soft edge, elongation,
 solidity, line-likeness, with the pixel noise as its noise.
 
@@ -225,28 +222,6 @@ def _smooth_curve(angles: np.ndarray, edge: np.ndarray, seen: np.ndarray, radius
     return curve, on, tolerance
 
 
-def _hull_radius(angles: np.ndarray, edge: np.ndarray, on: np.ndarray) -> np.ndarray:
-    """Per ray, the radius of the convex hull of the points on (polar, around the centre): the least
-    over the hull's sides of their distance over the cosine between the ray and the side's normal.
-    ``edge`` itself where the hull does not hold the centre (a disc mostly unseen)."""
-    points = np.column_stack([edge[on] * np.cos(angles[on]), edge[on] * np.sin(angles[on])])
-    if len(points) < 3:
-        return edge.copy()
-    hull = cv2.convexHull(points.astype(np.float32)).reshape(-1, 2).astype(np.float64)
-    ends = np.roll(hull, -1, axis=0)
-    normal = np.column_stack([ends[:, 1] - hull[:, 1], hull[:, 0] - ends[:, 0]])
-    normal /= np.maximum(np.hypot(normal[:, 0], normal[:, 1]), 1e-12)[:, None]
-    distance = np.einsum("ij,ij->i", normal, hull)
-    flip = distance < 0
-    normal[flip], distance[flip] = -normal[flip], -distance[flip]
-    if np.any(distance <= 1e-9):
-        return edge.copy()
-    cosine = np.cos(angles)[:, None] * normal[None, :, 0] + np.sin(angles)[:, None] * normal[None, :, 1]
-    with np.errstate(divide="ignore"):
-        reach = np.where(cosine > 1e-9, distance[None, :] / cosine, np.inf)
-    return reach.min(axis=1)
-
-
 def _fill(angles: np.ndarray, edge: np.ndarray, on: np.ndarray) -> np.ndarray:
     """``edge`` where ``on``, elsewhere interpolated around the turn between the nearest points on."""
     order = np.nonzero(on)[0]
@@ -291,17 +266,11 @@ def _trace(crop, centre_rc, radius, noise):
     if seen.mean() < MIN_SEEN:
         return "no outline"
     curve, on, tolerance = _smooth_curve(rays.angles, edge, seen, radius)
-    # An aperture's image is convex: a stretch of the path that dents it inwards follows another light's
-    # edge inside the disc (a neighbour's rim where light adds), not the disc's own.
-    hull = _hull_radius(rays.angles, edge, on)
-    dent = on & (edge < hull - tolerance)
-    on &= ~dent
-    target = np.where(dent, hull, curve)
-    # Rays off the curve (a neighbour's edge, an occluder's), in a dent, or not seen: the disc's edge is
-    # looked for again near where the disc's outline runs, where the path did not go.
+    # Rays off the curve (a neighbour's edge, an occluder's) or not seen: the disc's edge is looked for
+    # again near the curve, where the path did not go.
     near = tolerance / rays.step
     for k in np.nonzero(~on)[0]:
-        centre_j = target[k] / rays.step
+        centre_j = curve[k] / rays.step
         j0, j1 = max(0, int(centre_j - near)), min(len(rays.radii) - 1, int(centre_j + near) + 1)
         if j1 <= j0:
             continue
@@ -309,7 +278,7 @@ def _trace(crop, centre_rc, radius, noise):
         inside_k, outside_k, beyond_k, framed_k = rays.levels(k, j)
         if framed_k and shows_edge(inside_k - outside_k, outside_k, beyond_k, rays.sigma(j)):
             where = rays.crossing(k, j, outside_k + 0.5 * (inside_k - outside_k))
-            if where is not None and abs(where - target[k]) <= near * rays.step:
+            if where is not None and abs(where - curve[k]) <= near * rays.step:
                 edge[k], on[k], outer[k] = where, True, outside_k
     if on.mean() < MIN_SEEN:
         return "no outline"
