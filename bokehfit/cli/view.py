@@ -27,15 +27,21 @@ class ViewSession:
 def add_parser(subparsers) -> None:
     parser = subparsers.add_parser(
         "view",
-        help="path-trace the Cornell box interactively in the browser (WebGPU)",
+        help="path-trace the Cornell box in the browser (WebGPU), or steer a photo's compare (view PHOTO)",
         description=(
             "Serve a local page (127.0.0.1 only) that path-traces the Cornell box progressively in the "
             "browser through WebGPU, with the same WGSL as `bokehfit render`, beside a top-down sketch "
             "of the box with the focus plane and the depth of field. Hover the page's top-left corner "
             "for edit mode: focus, f-stop, shape, angle, blades or aspect, a `bokehfit compare --json` "
-            "result's fitted aperture, and PNG export. Ctrl-C stops the server."
+            "result's fitted aperture, and PNG export. With a PHOTO, the page at /photo shows that photo's "
+            "compare instead: every candidate outlined (used, usable, rejected), the verdict, the fitted "
+            "aperture and the candidates' table; click discs to use or drop them, Shift+drag to add one, "
+            "refit on exactly those discs (as compare --discs), save them as a discs file or save the "
+            "report. Ctrl-C stops the server."
         ),
     )
+    parser.add_argument("photo", nargs="?", metavar="PHOTO",
+                        help="a photo to compare in the page (read once at start; the page opens no other file)")
     parser.add_argument("--port", type=int, default=0, help="port to listen on (default 0: any free port)")
     parser.add_argument("--no-browser", action="store_true", help="print the URL but do not open a browser")
     parser.add_argument("--size", default="512x512", metavar="WxH", help="render size in pixels (default 512x512)")
@@ -47,8 +53,8 @@ def run(args: argparse.Namespace) -> ViewSession:
     from bokehfit.view import ViewerServer
 
     width, height = parse_size(args.size)
-    server = ViewerServer(args.port, size=(width, height), verbose=args.verbose)
-    url = server.url
+    server = ViewerServer(args.port, size=(width, height), verbose=args.verbose, photo=args.photo)
+    url = server.photo_url or server.url
     with _ctrl_c_interrupts():
         try:
             print(f"bokehfit view: serving {url} (Ctrl-C stops)", flush=True)

@@ -47,6 +47,20 @@ Routes
     the contents of the path tracer's ``mask_table`` binding, which the page
     uploads as they are.
 
+``GET /photo``, ``/photo.js``; ``/photo/info.json``, ``/photo/image.jpg``
+    With a photo (``bokehfit view PHOTO``, :mod:`bokehfit.view.photo`): its page,
+    its name, size, sha256 and the shapes a refit may try, and its display copy.
+``GET /photo/job?job=N``, ``/photo/result.json?job=N``, ``/photo/tiles.json?job=N``, ``/photo/report.html?job=N``
+    A compare's state (running with its stage, done, failed, cancelled); once
+    done, its ``compare --json`` document, its disc tiles and aperture diagram,
+    and its HTML report (job 0, the default: the automatic compare).
+``POST /photo/refit``, ``/photo/cancel``, ``/photo/discs-file``
+    Start a compare on exactly the page's discs (``{"discs": [{"center_xy":
+    [x, y], "diameter_px": D}], "shapes": [...]}``, checked by
+    :func:`bokehfit.view.photo.refit_labels`; 202 with its job), stop the one
+    running, or answer the picks as a discs file (the labels' format).
+    Without a photo every ``/photo`` route answers 404.
+
 Every other path answers 404, and a route asked with a method it does not
 serve answers 405 with ``Allow``.
 
@@ -224,6 +238,14 @@ _STATIC = {
     "/viewer.js": ("viewer.js", "text/javascript; charset=utf-8"),
     "/style.css": ("style.css", "text/css; charset=utf-8"),
 }
+#: The pages of ``bokehfit view PHOTO`` (404 where the server has no photo).
+_PHOTO_STATIC = {
+    "/photo": ("photo.html", "text/html; charset=utf-8"),
+    "/photo.js": ("photo.js", "text/javascript; charset=utf-8"),
+}
+#: The photo's routes: GET for the photo, its results and a refit's state; POST for the writes.
+_PHOTO_GET = ("/photo/info.json", "/photo/image.jpg", "/photo/job", "/photo/result.json", "/photo/tiles.json", "/photo/report.html")
+_PHOTO_POST = ("/photo/refit", "/photo/cancel", "/photo/discs-file")
 #: The scalar types whose components the page packs (viewer.js, ``Renderer.setValues``).
 _PAGE_SCALARS = ("f32", "u32", "i32")
 #: The methods each path serves (HEAD wherever GET); every other method answers 405.
@@ -238,12 +260,17 @@ _ROUTES = {
     "/mask_table": _READ,
     "/matched": ("POST",),
     "/mask": ("POST",),
+    **{path: _READ for path in _PHOTO_STATIC},
+    **{path: _READ for path in _PHOTO_GET},
+    **{path: ("POST",) for path in _PHOTO_POST},
 }
 #: What the body of each POST route must be, for the message when it is empty.
-_POST_BODIES = {"/matched": "a `bokehfit compare --json` result", "/mask": "an image file (PNG) of transmission"}
+_POST_BODIES = {"/matched": "a `bokehfit compare --json` result", "/mask": "an image file (PNG) of transmission",
+                "/photo/refit": 'the discs to fit ({"discs": [...], "shapes": [...]})', "/photo/cancel": "{}",
+                "/photo/discs-file": 'the picked discs ({"discs": [...]})'}
 #: The one content type each POST route takes: neither is one a page of another
 #: site may send without a preflight (text/plain, forms).
-_POST_TYPES = {"/matched": "application/json", "/mask": "image/png"}
+_POST_TYPES = {"/matched": "application/json", "/mask": "image/png", **{path: "application/json" for path in _PHOTO_POST}}
 _METHODS = ("GET", "HEAD", "POST")
 
 
@@ -1015,6 +1042,17 @@ def _static_file(name: str) -> bytes:
     return resources.files("bokehfit.view").joinpath("static", name).read_bytes()
 
 
+def _download_stem(name: str) -> str:
+    """The photo's stem for a download's file name, in characters safe in a header."""
+    stem = re.sub(r"[^A-Za-z0-9._-]+", "_", name.rsplit(".", 1)[0])[:80]
+    return f"{stem or 'photo'}_bokehfit"
+
+
+def _photo_json_bytes(result: dict) -> bytes:
+    """A result's ``compare --json`` document as the command writes it (indent 1)."""
+    return (json.dumps(result["json"], indent=1, allow_nan=False) + "\n").encode("utf-8")
+
+
 @lru_cache(maxsize=8)
 def _pathtrace_bytes(scene_name: str) -> bytes:
     return _pathtrace_source_cached(scene_name, False).encode("utf-8")
@@ -1023,7 +1061,8 @@ def _pathtrace_bytes(scene_name: str) -> bytes:
 class _Site:
     """What every request of one server shares: its names, its token, its masks and its settings."""
 
-    def __init__(self, port: int, scene_name: str, size: tuple[int, int], verbose: bool):
+    def __init__(self, port: int, scene_name: str, size: tuple[int, int], verbose: bool, photo=None):
+        self.photo = photo
         self.scene_name = scene_name
         self.size = size
         self.verbose = verbose
@@ -1033,6 +1072,7 @@ class _Site:
         #: The per-run secret the page sends back with every write (in the page it is served).
         self.token = secrets.token_urlsafe(32)
         self.page = _static_file("index.html").replace(TOKEN_PLACEHOLDER, self.token.encode("ascii"))
+        self.photo_page = _static_file("photo.html").replace(TOKEN_PLACEHOLDER, self.token.encode("ascii"))
 
 
 class _Handler(BaseHTTPRequestHandler):
@@ -1248,12 +1288,60 @@ class _Handler(BaseHTTPRequestHandler):
                 return self._send(HTTPStatus.OK, table, "application/octet-stream")
             if url.path == "/favicon.ico":
                 return self._send(HTTPStatus.NO_CONTENT, b"", "image/x-icon")
+            if url.path in _PHOTO_STATIC or url.path in _PHOTO_GET:
+                return self._photo_get(url)
         except InputError as error:
             return self._error(HTTPStatus.BAD_REQUEST, str(error))
         raise RuntimeError(f"route {url.path!r} is in _ROUTES but has no answer")
 
-    def _post(self, body: bytes | bytearray) -> None:  # /matched and /mask
+    def _photo_session(self):
+        if self.server.photo is None:
+            raise _Refused(HTTPStatus.NOT_FOUND, "no photo here: start `bokehfit view PHOTO` to compare one")
+        return self.server.photo
+
+    def _photo_get(self, url) -> None:
+        session = self._photo_session()
+        if url.path in _PHOTO_STATIC:
+            name, content_type = _PHOTO_STATIC[url.path]
+            return self._send(HTTPStatus.OK, self.server.photo_page if name == "photo.html" else _static_file(name), content_type)
+        if url.path == "/photo/info.json":
+            return self._json(HTTPStatus.OK, session.info())
+        if url.path == "/photo/image.jpg":
+            return self._send(HTTPStatus.OK, session.display_jpeg, "image/jpeg")
+        query = parse_qs(url.query)
+        job = _query_int(query, "job", session.auto_job)
+        if url.path == "/photo/job":
+            return self._json(HTTPStatus.OK, session.status(job))
+        result = session.result(job)
+        if url.path == "/photo/result.json":
+            headers = (("Content-Disposition", f'inline; filename="{_download_stem(session.name)}.json"'),)
+            return self._send(HTTPStatus.OK, _photo_json_bytes(result), "application/json; charset=utf-8", headers)
+        if url.path == "/photo/tiles.json":
+            from bokehfit.report.html import aperture_diagram
+
+            aperture = result["json"]["aperture"]
+            svg = aperture_diagram(aperture) if aperture.get("shape") is not None else None
+            return self._json(HTTPStatus.OK, {"job": job, "tiles": result["tiles"], "aperture_svg": svg, "summary": result["summary"]})
+        headers = (("Content-Disposition", f'inline; filename="{_download_stem(session.name)}.html"'),)
+        return self._send(HTTPStatus.OK, result["html"].encode("utf-8"), "text/html; charset=utf-8", headers)
+
+    def _photo_post(self, path: str, body: bytes | bytearray) -> None:
+        session = self._photo_session()
+        with _collector_paused():
+            document = parse_json_body(body, object_only=True)
+        if path == "/photo/refit":
+            return self._json(HTTPStatus.ACCEPTED, {"job": session.refit(document)})
+        if path == "/photo/cancel":
+            return self._json(HTTPStatus.OK, session.cancel())
+        from bokehfit.view.photo import discs_file, refit_labels
+
+        labels, _ = refit_labels({"discs": document.get("discs")}, session.width, session.height)
+        return self._json(HTTPStatus.OK, discs_file(labels, session.name, session.sha256, session.width, session.height))
+
+    def _post(self, body: bytes | bytearray) -> None:  # /matched, /mask and the photo's writes
         # One body at a time reaches here (the transport answers bodies on one thread).
+        if urlsplit(self.path).path in _PHOTO_POST:
+            return self._photo_post(urlsplit(self.path).path, body)
         if urlsplit(self.path).path == "/mask":
             answer = mask_upload(body, self.server.masks)
         else:
@@ -1289,6 +1377,7 @@ class ViewerServer:
         verbose: bool = False,
         request_timeout_s: float = REQUEST_TIMEOUT_S,
         max_connections: int = MAX_CONNECTIONS,
+        photo=None,
     ):
         if isinstance(port, bool) or not isinstance(port, int) or not 0 <= port <= 65535:
             raise InputError(f"port must be an integer from 0 to 65535 (got {port!r})")
@@ -1302,8 +1391,18 @@ class ViewerServer:
         # Build the shaders now: a broken install fails here, not in the browser.
         _pathtrace_source_cached(scene, False)
         display_source()
-        self._listener = socket.create_server(("127.0.0.1", port), backlog=LISTEN_BACKLOG)
-        self._site = _Site(self.port, scene, tuple(size), verbose)
+        session = None
+        if photo is not None:  # read the photo first: a bad one is refused before the socket opens
+            from bokehfit.view.photo import PhotoSession
+
+            session = photo if isinstance(photo, PhotoSession) else PhotoSession(photo)
+        try:
+            self._listener = socket.create_server(("127.0.0.1", port), backlog=LISTEN_BACKLOG)
+        except BaseException:
+            if session is not None:
+                session.close()
+            raise
+        self._site = _Site(self.port, scene, tuple(size), verbose, session)
         limits = Limits(
             request_timeout_s=float(request_timeout_s),
             min_rate_bytes_per_s=MIN_TRANSFER_RATE,
@@ -1328,6 +1427,16 @@ class ViewerServer:
     @property
     def url(self) -> str:
         return f"http://127.0.0.1:{self.port}/"
+
+    @property
+    def photo(self):
+        """The :class:`~bokehfit.view.photo.PhotoSession` of ``bokehfit view PHOTO`` (None without a photo)."""
+        return self._site.photo
+
+    @property
+    def photo_url(self) -> str | None:
+        """The photo's page (None without a photo)."""
+        return None if self._site.photo is None else f"{self.url}photo"
 
     @property
     def token(self) -> str:
@@ -1356,6 +1465,8 @@ class ViewerServer:
             self._thread.join()
             self._thread = None
         self._listener.close()
+        if self._site.photo is not None:
+            self._site.photo.close()
 
     def __enter__(self) -> ViewerServer:
         return self
