@@ -13,7 +13,8 @@ from pathlib import Path
 
 from bokehfit.errors import InputError
 from bokehfit.io.colour import Encoding, detect_encoding
-from bokehfit.io.exif import ExifTags, xmp_property
+from bokehfit.io.tags import ExifTags
+from bokehfit.io.xmp import xmp_property
 
 __all__ = [
     "MAX_FILE_BYTES",

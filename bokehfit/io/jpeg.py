@@ -18,9 +18,10 @@ import numpy as np
 from bokehfit.errors import InputError
 from bokehfit.io.colour import icc_description, named_encoding
 from bokehfit.io.decoders import damage_note, imdecode, library_messages, short
-from bokehfit.io.exif import build_exif, read_exif_tags
+from bokehfit.io.exif import build_exif
 from bokehfit.io.files import METADATA_MAX_BYTES, Meta, check_size, encoding_for
 from bokehfit.io.linear import Photo, linearise_integer, make_photo, orient, progress_for
+from bokehfit.io.tags import read_exif_tags
 
 __all__ = ["JPEG_MAX_PIXELS_PER_BYTE", "load_jpeg"]
 

@@ -18,7 +18,7 @@ Hostile and damaged files
   device or a link to one is refused unopened).
 - Every chunk and segment length is checked against the file's size before
   it is read; metadata larger than :data:`METADATA_MAX_BYTES` (XMP:
-  :data:`~bokehfit.io.exif.XMP_MAX_BYTES`), stored or after decompression,
+  :data:`~bokehfit.io.xmp.XMP_MAX_BYTES`), stored or after decompression,
   is skipped with a note, never inflated in full; all of a PNG's metadata
   chunks together inflate to at most :data:`METADATA_INFLATE_BUDGET_BYTES`
   (one ICC profile and one XMP packet are read; more are skipped, counted).

@@ -17,9 +17,11 @@ import numpy as np
 
 from bokehfit.errors import InputError
 from bokehfit.io.decoders import imdecode, short
-from bokehfit.io.exif import XMP_MAX_BYTES, build_exif, read_exif_tags
+from bokehfit.io.exif import build_exif
 from bokehfit.io.files import METADATA_MAX_BYTES, Meta, check_size, encoding_for
 from bokehfit.io.linear import Photo, linearise_integer, make_photo, orient, progress_for
+from bokehfit.io.tags import read_exif_tags
+from bokehfit.io.xmp import XMP_MAX_BYTES
 
 __all__ = ["DEFLATE_MAX_RATIO", "METADATA_INFLATE_BUDGET_BYTES", "PNG_SIGNATURE", "load_png"]
 

@@ -15,9 +15,11 @@ import numpy as np
 from bokehfit.errors import InputError
 from bokehfit.io.colour import luminance_weights
 from bokehfit.io.decoders import short
-from bokehfit.io.exif import XMP_MAX_BYTES, ExifTags, build_exif, read_exif_tags, read_file_tags
+from bokehfit.io.exif import build_exif
 from bokehfit.io.files import METADATA_MAX_BYTES, MIN_SIDE_PX, check_size
 from bokehfit.io.linear import Photo, Progress, display_from_linear, displayed_size, make_photo, orient, row_blocks
+from bokehfit.io.tags import ExifTags, read_exif_tags, read_file_tags
+from bokehfit.io.xmp import XMP_MAX_BYTES
 
 __all__ = ["load_raw"]
 

@@ -16,7 +16,7 @@ import numpy as np
 from bokehfit.errors import InputError
 from bokehfit.io.colour import linear_encoding, luminance_weights
 from bokehfit.io.decoders import imdecode, short
-from bokehfit.io.exif import XMP_MAX_BYTES, Exif, build_exif, read_exif_tags
+from bokehfit.io.exif import Exif, build_exif
 from bokehfit.io.files import METADATA_MAX_BYTES, Meta, check_size, encoding_for
 from bokehfit.io.jpeg import JPEG_MAX_PIXELS_PER_BYTE
 from bokehfit.io.linear import (
@@ -31,6 +31,8 @@ from bokehfit.io.linear import (
 )
 from bokehfit.io.png import DEFLATE_MAX_RATIO
 from bokehfit.io.raw import load_raw
+from bokehfit.io.tags import read_exif_tags
+from bokehfit.io.xmp import XMP_MAX_BYTES
 
 __all__ = ["FLOAT_SAMPLE_MAX", "FLOAT_WHITE_MAX", "load_tiff"]
 
