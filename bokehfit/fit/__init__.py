@@ -165,6 +165,12 @@ class ApertureFit:
     notes: tuple = ()  #: models set aside and why (an elongation the discs do not share)
     #: What the discs' colours said (None where fewer than three could be measured, or no colour given).
     chromatic_measure: ChromaticMeasure | None = None
+    #: Seconds by step of the fit (perf_counter): ``choose`` (the discs that show a shape), ``screen``
+    #: (crops and outline screens), ``family <name>`` (each candidate's pixel fit on the model discs),
+    #: ``winner`` (the winner on the other discs), ``joint``, ``features`` (the §3b feature trials),
+    #: ``plain`` (the simplest model against the winner), ``refit`` (discs beyond the joint fit),
+    #: ``chromatic``; ``time_s`` is their sum with the bookkeeping between them.
+    timing_s: dict = dataclasses.field(default_factory=dict)
     success = True
 
     def __bool__(self) -> bool:
@@ -723,9 +729,18 @@ def fit_aperture(
     if clipped is not None and np.shape(clipped) != np.shape(luminance):
         raise InputError(f"clipped must have the luminance's shape {np.shape(luminance)} (got {np.shape(clipped)})")
     families = families_for(shapes)
+    timing: dict[str, float] = {}
+    lap = [time.perf_counter()]
+
+    def clock(step: str) -> None:  # the time since the last step's end, added to ``step``
+        now = time.perf_counter()
+        timing[step] = timing.get(step, 0.0) + now - lap[0]
+        lap[0] = now
+
     models: dict = {}  # the model signatures of the screens, made once for all discs
     # Whether a blob is an aperture's image does not hang on the shapes the caller lets the fit try.
     chosen, set_aside = _choose_discs(discs, FAMILIES, options.max_discs, models, np.shape(luminance))
+    clock("choose")
     if not chosen:
         flagged = {
             "cut by the frame": sum(d.clipped for d in discs),
@@ -736,7 +751,7 @@ def fit_aperture(
         why = ", ".join(f"{n} {what}" for what, n in flagged.items() if n)
         found = f"{len(discs)} found: {why}" if discs else "none found"
         return FailedFit("no_discs", f"no disc is clean enough to fit ({found})", time_s=time.perf_counter() - start,
-                         rejected=set_aside)
+                         rejected=set_aside, timing_s=timing)
 
     crops = [crop_disc(luminance, d, clipped, discs) for d in chosen]
     # Every family is screened straight and, where it has blades, rounded (design.md §3b): a
@@ -760,12 +775,16 @@ def fit_aperture(
 
     candidates = [g for f in shortlist for g in (f, rounded_of.get(f) if f in rounded_of and rounder(f) else None)
                   if g is not None]
+    clock("screen")
 
     # Model selection on the first model_discs discs, then the winner on all of them.
     model_discs = options.model_discs
     disc_fits = []
     for i, (disc, crop, disc_screens, found) in enumerate(zip(chosen[:model_discs], crops, screened, screens_of)):
-        fits = {g.name: fit_discs([crop], g, _fit_start(found[g].aperture)).fits[0] for g in candidates}
+        fits = {}
+        for g in candidates:
+            fits[g.name] = fit_discs([crop], g, _fit_start(found[g].aperture)).fits[0]
+            clock(f"family {g.name}")
         disc_fits.append(DiscFit(disc, disc_screens, fits))
         if progress is not None:
             progress(i + 1, len(chosen))
@@ -792,6 +811,7 @@ def fit_aperture(
         disc_fits.append(DiscFit(disc, disc_screens, {winner.name: fitted}))
         if progress is not None:
             progress(i + 1, len(chosen))
+    clock("winner")
 
     # Consensus: discs whose shape or angle the others do not share are left out, with the reason.
     winner_fits = [item.fits[winner.name] for item in disc_fits]
@@ -809,6 +829,7 @@ def fit_aperture(
     disc_starts = [crops[i].values_of(winner_fits[i]) for i in joint_ids]
     aperture = _consensus_start(winner, [winner_fits[i] for i in joint_ids], [turned[i] for i in joint_ids])
     joint = fit_discs(joint_crops, winner, aperture, noise=noise, disc_starts=disc_starts)
+    clock("joint")
     feature_tests: dict[str, float] = {}
     joint_discs = [chosen[i] for i in joint_ids]
     tests = _feature_tests([winner_fits[i] for i in joint_ids], joint_discs, [winner_screens[i] for i in joint_ids],
@@ -820,6 +841,7 @@ def fit_aperture(
         visible = feature != "rim" or abs(trial.aperture.rim) >= MIN_RIM
         if feature_tests[feature] >= FEATURE_DELTA_BIC and visible and not _at_bound(trial.aperture, feature):
             joint = trial
+    clock("features")
     # With a feature on, the shape is chosen again between the winner and the simplest model:
     # a cat-eye cut makes round discs look like a rounded triangle until the cut is in the model,
     # and an anamorphic squeeze makes them look like a slit (whose own aspect takes the squeeze).
@@ -865,6 +887,7 @@ def fit_aperture(
             winner, joint, turned = simplest, trial if trial is not None else plain_fit(), [False] * len(turned)
             winner_screens = [found[winner] for found in screens_of]
             crops = [dataclasses.replace(c, turned=False) for c in crops]
+    clock("plain")
     seen_aperture = joint.aperture
     # The discs left out of the joint fit (beyond JOINT_DISCS) are refitted with the joint aperture fixed.
     final = dict(zip(joint_ids, joint.fits))
@@ -872,6 +895,7 @@ def fit_aperture(
         final[i] = fit_discs([crops[i]], winner, seen_aperture, free=(), disc_starts=[crops[i].values_of(winner_fits[i])]).fits[0]
     used_fits = [DiscFit(disc_fits[i].disc, disc_fits[i].screens, {**disc_fits[i].fits, winner.name: final[i]},
                          own=winner_fits[i], turned=turned[i]) for i in kept]
+    clock("refit")
 
     best_bic = models[0].bic
     winner_model = _combine(winner, [final[i] for i in kept], [winner_screens[i] for i in kept])
@@ -917,6 +941,7 @@ def fit_aperture(
     if colours is not None and colours.significant:
         seen_aperture = seen_aperture.replace(chromatic=colours.chromatic)
         uncertainty.update(chromatic_red=colours.uncertainty.red, chromatic_blue=colours.uncertainty.blue)
+    clock("chromatic")
     aperture = seen_aperture.near() if focus_side == "near" else seen_aperture
     seen_angle = seen_aperture.canonical_angle_deg
     edges = sum(chosen[i].evidence == "edge" for i in kept)
@@ -956,4 +981,5 @@ def fit_aperture(
         feature_uncertainty=uncertainty,
         notes=tuple(notes),
         chromatic_measure=colours,
+        timing_s=timing,
     )

@@ -101,6 +101,8 @@ class FailedFit:
     candidates: list = field(default_factory=list)  #: the models tried (none)
     disc_fits: list = field(default_factory=list)
     time_s: float = 0.0
+    #: Seconds by step of the fit (``ApertureFit.timing_s``'s keys, those reached).
+    timing_s: dict = field(default_factory=dict)
     success = False
     sure = False
 
