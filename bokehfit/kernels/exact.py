@@ -49,26 +49,23 @@ from bokehfit.apertures.samplers import x_minus_sin
 __all__ = ["RIM_SUPERSAMPLE", "coverage", "mask_border_segments", "mask_coverage", "quadrant_area", "radial_fraction", "rim_coverage"]
 
 
-@dataclass(frozen=True)
-class _Piece:
-    """A boundary piece y = f(x) on [x_min, x_max], monotone in x."""
-
-    x_min: float
-    x_max: float
-    sign: float  #: +1 when the boundary runs left to right
-    increasing: bool
-    antiderivative: Callable[[np.ndarray], np.ndarray]
-    crossing: Callable[[np.ndarray], np.ndarray]  #: x* where f crosses Y, clamped to the piece
+#: Columns of one elliptic piece's row in :attr:`_Boundary.arcs` (see :func:`_elliptic_pieces`).
+_ARC_COLUMNS = ("cx", "cy", "rx", "ry", "side", "x_left", "y_left", "theta_left", "base", "upper", "right",
+                "y_low", "y_high", "x_min", "x_max", "sign", "increasing")
 
 
-def _elliptic_pieces(arc: Arc) -> list[_Piece]:
-    """The arc split at its ellipse's quadrant borders into pieces monotone in x and y.
+def _elliptic_pieces(arc: Arc) -> list[tuple[float, ...]]:
+    """The arc split at its ellipse's quadrant borders into pieces monotone in x and y, one row
+    of :data:`_ARC_COLUMNS` each.
 
-    Within a quadrant y = cy ± ry·√(1 − t²), t = (x − cx)/rx. The integral of
-    f from the piece's left end is taken as the chord's trapezoid minus the
-    elliptic segment ½·rx·ry·(Δθ − sin Δθ) (:func:`x_minus_sin`), which stays
-    exact for the gently curved arcs of slightly rounded blades, where the
-    closed-form antiderivative would cancel.
+    Within a quadrant y = cy ± ry·√(1 − t²), t = (x − cx)/rx (``side`` ±1). The integral of
+    f from the piece's left end (``x_left``, ``y_left``, at angle ``theta_left``) is taken as the
+    chord's trapezoid minus the elliptic segment ½·rx·ry·(Δθ − sin Δθ) (:func:`x_minus_sin`),
+    which stays exact for the gently curved arcs of slightly rounded blades, where the
+    closed-form antiderivative would cancel (:func:`_arc_integral`). ``base`` is the whole turns
+    of the piece's angles, ``upper`` (1 or 0) whether it is in the upper half, ``right`` (±1)
+    which side of the centre it is on, ``sign`` +1 where the boundary runs left to right and
+    ``increasing`` (1 or 0) whether f rises with x.
     """
     (cx, cy), (rx, ry) = arc.centre, arc.radii
     lo, hi = sorted((arc.start, arc.end))
@@ -96,35 +93,41 @@ def _elliptic_pieces(arc: Arc) -> list[_Piece]:
         x_min, x_max = min(x0, x1), max(x0, x1)
         y_low, y_high = min(y0, y1), max(y0, y1)
         side = 1.0 if upper else -1.0
-
-        def theta_at(x, cx=cx, rx=rx, upper=upper, base=base):
-            angle = np.arccos(np.clip((x - cx) / rx, -1.0, 1.0))
-            return base + (angle if upper else 2.0 * math.pi - angle)
-
-        def integral(x, cx=cx, cy=cy, rx=rx, ry=ry, side=side, x_left=x_left, y_left=y_left,
-                     theta_left=theta_left, theta_at=theta_at):
-            # ∫ f from the left end to x: trapezoid under the chord minus the elliptic segment.
-            t = np.clip((x - cx) / rx, -1.0, 1.0)
-            y = cy + side * ry * np.sqrt(np.maximum((1.0 - t) * (1.0 + t), 0.0))
-            return 0.5 * (y_left + y) * (x - x_left) - 0.5 * rx * ry * x_minus_sin(theta_at(x) - theta_left)
-
-        def crossing(y, cx=cx, cy=cy, rx=rx, ry=ry, right=right, y_low=y_low, y_high=y_high, x_min=x_min, x_max=x_max):
-            s = (np.clip(y, y_low, y_high) - cy) / ry
-            x = cx + (1.0 if right else -1.0) * rx * np.sqrt(np.maximum((1.0 - s) * (1.0 + s), 0.0))
-            return np.clip(x, x_min, x_max)
-
         # f rises with x left of the centre in the upper half and right of it in the lower half.
-        pieces.append(_Piece(x_min, x_max, sign, upper != right, integral, crossing))
+        pieces.append((cx, cy, rx, ry, side, x_left, y_left, theta_left, base, float(upper), 1.0 if right else -1.0,
+                       y_low, y_high, x_min, x_max, sign, float(upper != right)))
     return pieces
+
+
+def _arc_integral(arcs: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """∫ f from each elliptic piece's left end to x: the trapezoid under the chord minus the elliptic
+    segment (:func:`_elliptic_pieces`). ``arcs``: columns (rows of :data:`_ARC_COLUMNS`, each
+    shaped to broadcast against ``x``)."""
+    cx, cy, rx, ry, side, x_left, y_left, theta_left, base, upper = arcs[:10]
+    angle = np.arccos(np.clip((x - cx) / rx, -1.0, 1.0))
+    theta = base + np.where(upper > 0.0, angle, 2.0 * math.pi - angle)
+    t = np.clip((x - cx) / rx, -1.0, 1.0)
+    y = cy + side * ry * np.sqrt(np.maximum((1.0 - t) * (1.0 + t), 0.0))
+    return 0.5 * (y_left + y) * (x - x_left) - 0.5 * rx * ry * x_minus_sin(theta - theta_left)
+
+
+def _arc_crossing(arcs: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """x* where each elliptic piece crosses the height y, clamped to the piece."""
+    cx, cy, rx, ry = arcs[:4]
+    right, y_low, y_high, x_min, x_max = arcs[10:15]
+    s = (np.clip(y, y_low, y_high) - cy) / ry
+    x = cx + right * rx * np.sqrt(np.maximum((1.0 - s) * (1.0 + s), 0.0))
+    return np.clip(x, x_min, x_max)
 
 
 @dataclass(frozen=True)
 class _Boundary:
     """An outline scaled to pixels, as the pieces of the module notes: its straight sides that
-    are not vertical, as rows (x0, y0, x1, y1), and its arcs' monotone pieces."""
+    are not vertical, as rows (x0, y0, x1, y1), and its arcs' monotone pieces, as rows of
+    :data:`_ARC_COLUMNS`."""
 
     segments: np.ndarray  #: (S, 4)
-    arcs: list[_Piece]
+    arcs: np.ndarray  #: (A, len(_ARC_COLUMNS))
 
 
 def _boundary(outline: Outline, scale: float) -> _Boundary:
@@ -140,7 +143,8 @@ def _scaled_boundary(scaled: Outline) -> _Boundary:
                 segments.append((*piece.start, *piece.end))
         else:
             arcs.extend(_elliptic_pieces(piece))
-    return _Boundary(np.array(segments, dtype=np.float64).reshape(-1, 4), arcs)
+    return _Boundary(np.array(segments, dtype=np.float64).reshape(-1, 4),
+                     np.array(arcs, dtype=np.float64).reshape(-1, len(_ARC_COLUMNS)))
 
 
 def quadrant_area(
@@ -153,52 +157,113 @@ def quadrant_area(
     of shape (len(ys), len(xs)).
     """
     outline = aperture if isinstance(aperture, Outline) else aperture.outline(field_position)
-    xs = np.asarray(xs, dtype=np.float64)[None, :]
-    ys = np.asarray(ys, dtype=np.float64)[:, None]
+    xs = np.asarray(xs, dtype=np.float64).ravel()
+    ys = np.asarray(ys, dtype=np.float64).ravel()
     return _area_below_left(_boundary(outline, scale), xs, ys)
 
 
-#: Side-point pairs :func:`_area_below_left` evaluates at once (bounds its temporaries).
+#: Piece-point pairs :func:`_area_below_left` evaluates at once (bounds its temporaries).
 _SIDE_CHUNK = 2**18
 
 
-def _area_below_left(boundary: _Boundary, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
-    """F(X, Y) of the module notes at the points (xs, ys), broadcast together: the straight sides
-    all at once (:func:`_segment_quadrant`), for a chunk of the points at a time, then each arc's
-    pieces. Every point's sum runs over the sides in the same order however many points there
-    are, so a point gets the same value in a whole grid as among a few."""
-    shape = np.broadcast_shapes(np.shape(xs), np.shape(ys))
+def _piece_columns(boundary: _Boundary, xs: np.ndarray, ys: np.ndarray):
+    """Everything of F that hangs on X alone or on Y alone, for every piece (sides, then arc pieces):
+    t = X clamped to the piece, its integral H(t), the crossing x*(Y) and H(x*), with each piece's
+    left end, H there, sign and whether f rises."""
+    sides, arcs = boundary.segments, boundary.arcs
+    x0, y0, x1, y1 = sides.T[:, :, None]
+    left = x0 < x1
+    xa, ya, xb, yb = np.where(left, x0, x1), np.where(left, y0, y1), np.where(left, x1, x0), np.where(left, y1, y0)
+    slope = (yb - ya) / (xb - xa)
+    flat = slope == 0.0
+    side_t = np.clip(xs[None, :], xa, xb)
+    side_c = np.where(flat, np.where(ys[None, :] > ya, xb, xa),
+                      np.clip(xa + (ys[None, :] - ya) / np.where(flat, 1.0, slope), xa, xb))
+
+    def under(x):  # ∫ f from x_min to x
+        return ya * (x - xa) + 0.5 * slope * (x - xa) ** 2
+
+    columns = arcs.T[:, :, None]
+    x_min = columns[13]
+    arc_t = np.clip(xs[None, :], x_min, columns[14])
+    arc_c = _arc_crossing(columns, ys[None, :])
+    t = np.concatenate([side_t, arc_t])
+    c = np.concatenate([side_c, arc_c])
+    h_t = np.concatenate([under(side_t), _arc_integral(columns, arc_t)])
+    h_c = np.concatenate([under(side_c), _arc_integral(columns, arc_c)])
+    start = np.concatenate([xa, x_min])[:, :, None]
+    h_start = np.concatenate([np.zeros_like(xa), _arc_integral(columns, x_min)])[:, :, None]
+    sign = np.concatenate([np.where(left, 1.0, -1.0), columns[15]])[:, :, None]
+    increasing = np.concatenate([(slope >= 0.0).ravel(), columns[16].ravel() > 0.0])
+    return t, c, h_t, h_c, start, h_start, sign, increasing
+
+
+def _area_below_left(boundary: _Boundary, xs: np.ndarray, ys: np.ndarray,
+                     rows: np.ndarray | None = None, cols: np.ndarray | None = None) -> np.ndarray:
+    """F(X, Y) of the module notes on the grid ys × xs (shape (len(ys), len(xs))), or, given ``rows``
+    and ``cols``, at the points (xs[cols], ys[rows]).
+
+    For a piece, F's terms hang on X alone (t = X clamped to the piece, H(t)) or on Y alone (the
+    crossing x*, H(x*)), and x* ∧ t is one of the two: the integrals are taken on xs and ys
+    once (:func:`_piece_columns`), and over the points only sums and products are left, for all
+    the pieces at once, a chunk of the points at a time. Every point's sum runs over the pieces
+    in the same order however many points there are, so a point gets the same value in a whole
+    grid as among a few."""
+    grid = rows is None
+    shape = (len(ys), len(xs)) if grid else np.shape(rows)
     total = np.zeros(shape)
-    sides = boundary.segments
-    if len(sides):
-        flat_x, flat_y = np.broadcast_to(xs, shape).ravel(), np.broadcast_to(ys, shape).ravel()
-        out = total.reshape(-1)
-        step = max(1, _SIDE_CHUNK // len(sides))
-        x0, y0, x1, y1 = sides.T[:, :, None]
-        for lo in range(0, out.size, step):
-            chunk = slice(lo, lo + step)
-            out[chunk] = _segment_quadrant(x0, y0, x1, y1, flat_x[chunk], flat_y[chunk]).sum(axis=0)
-    for piece in boundary.arcs:
-        t = np.clip(xs, piece.x_min, piece.x_max)
-        x_cross = np.minimum(t, piece.crossing(ys))
-        h_cross = piece.antiderivative(x_cross)
-        if piece.increasing:  # f < Y left of x*
-            integral = h_cross - piece.antiderivative(piece.x_min) + ys * (t - x_cross)
-        else:  # f ≥ Y left of x*
-            integral = ys * (x_cross - piece.x_min) + piece.antiderivative(t) - h_cross
-        total -= piece.sign * integral
+    count = len(boundary.segments) + len(boundary.arcs)
+    if count == 0 or total.size == 0:
+        return total
+    t, c, h_t, h_c, start, h_start, sign, increasing = _piece_columns(boundary, xs, ys)
+    rising, falling = np.flatnonzero(increasing), np.flatnonzero(~increasing)
+    if grid:
+        step = max(1, _SIDE_CHUNK // (count * max(len(xs), 1)))
+        chunks = [(slice(lo, lo + step), slice(None)) for lo in range(0, len(ys), step)]
+    else:
+        rows, cols = np.ravel(rows), np.ravel(cols)
+        step = max(1, _SIDE_CHUNK // count)
+        chunks = [(rows[lo : lo + step], cols[lo : lo + step]) for lo in range(0, rows.size, step)]
+    out = total.reshape(-1) if not grid else total
+    at = 0
+    for row, col in chunks:
+        if grid:  # (pieces, rows, columns)
+            tt, ht = t[:, None, :], h_t[:, None, :]
+            cc, hc, y = c[:, row, None], h_c[:, row, None], ys[None, row, None]
+        else:  # (pieces, points)
+            tt, ht, cc, hc, y = t[:, col], h_t[:, col], c[:, row], h_c[:, row], ys[None, row]
+            start_p, h_start_p, sign_p = start[:, :, 0], h_start[:, :, 0], sign[:, :, 0]
+        s0, hs0, sg = (start, h_start, sign) if grid else (start_p, h_start_p, sign_p)
+        below = tt <= cc
+        x_cross = np.where(below, tt, cc)  # min(t, x*)
+        h_cross = np.where(below, ht, hc)
+        values = np.empty(np.broadcast_shapes(x_cross.shape, (count, *np.shape(y)[1:])))
+        if len(rising):  # f < Y left of x*
+            r = rising
+            values[r] = h_cross[r] - hs0[r] + y * (np.broadcast_to(tt, x_cross.shape)[r] - x_cross[r])
+        if len(falling):  # f ≥ Y left of x*
+            f = falling
+            values[f] = y * (x_cross[f] - s0[f]) + np.broadcast_to(ht, x_cross.shape)[f] - h_cross[f]
+        part = (-sg * values).sum(axis=0)
+        if grid:
+            out[row] = part
+        else:
+            out[at : at + part.size] = part
+            at += part.size
     return total
 
 
 #: Largest spacing (pixels of arc length) of the points :func:`_edge_pixels` puts on the outline.
 _EDGE_SAMPLE_PX = 0.5
 #: :func:`coverage` integrates every pixel when the outline crosses more than this share of them,
-#: or when the whole grid costs fewer than this many corner-piece evaluations (an elliptic
-#: piece counting ``_ELLIPTIC_COST`` straight ones): finding the crossed pixels costs about
-#: that much (measured on two cores: polygons break even near 120-px frames, circles near 60).
+#: or when the whole grid costs at most ``_EDGE_ONLY_MIN_WORK``: its corners times its pieces and
+#: ``_EDGE_FIXED_PIECES`` more (the work of the whole grid against the fixed cost of finding the
+#: crossed pixels). Measured on two cores: a 64-px frame of a circle, a polygon or a rounded 9-gon
+#: integrates faster whole and a 96-px one by its crossed pixels; so does a 45-px frame of a
+#: vignetted circle's 38 pieces, not a 64-px one.
 _EDGE_ONLY_SHARE = 0.5
-_EDGE_ONLY_MIN_WORK = 80_000
-_ELLIPTIC_COST = 4
+_EDGE_ONLY_MIN_WORK = 110_000
+_EDGE_FIXED_PIECES = 12
 
 
 def _edge_pixels(scaled: Outline, size: int, origin: tuple[float, float]) -> np.ndarray:
@@ -269,10 +334,10 @@ def coverage(
     boundary = _scaled_boundary(scaled)
     dx, dy = offset_xy
     xs, ys = edges - dx, edges - dy
-    work = (size + 1) ** 2 * (len(boundary.segments) + _ELLIPTIC_COST * len(boundary.arcs))
-    crossed = None if work < _EDGE_ONLY_MIN_WORK else _edge_pixels(scaled, size, (centre + dx, centre + dy))
+    work = (size + 1) ** 2 * (len(boundary.segments) + len(boundary.arcs) + _EDGE_FIXED_PIECES)
+    crossed = None if work <= _EDGE_ONLY_MIN_WORK else _edge_pixels(scaled, size, (centre + dx, centre + dy))
     if crossed is None or crossed.sum() > _EDGE_ONLY_SHARE * size * size:
-        cumulative = _area_below_left(boundary, xs[None, :], ys[:, None])
+        cumulative = _area_below_left(boundary, xs, ys)
         cells = cumulative[1:, 1:] - cumulative[:-1, 1:] - cumulative[1:, :-1] + cumulative[:-1, :-1]
         return np.clip(aperture_rows_to_image(cells), 0.0, 1.0)  # rows of `cells` run up in y
     import cv2
@@ -290,7 +355,7 @@ def coverage(
             corners[dr : dr + size, dc : dc + size] |= evaluate
     rows, cols = np.nonzero(corners)
     cumulative = np.zeros((size + 1, size + 1))
-    cumulative[rows, cols] = _area_below_left(boundary, xs[cols], ys[rows])
+    cumulative[rows, cols] = _area_below_left(boundary, xs, ys, rows, cols)
     cells = cumulative[1:, 1:] - cumulative[:-1, 1:] - cumulative[1:, :-1] + cumulative[:-1, :-1]
     inside = np.zeros(count)
     inside[1:] = cells.ravel()[probes] > 0.5  # 0 or 1 up to rounding
@@ -368,11 +433,14 @@ def rim_coverage(
                     offset_xy=(dx * supersample, dy * supersample))
     centre = (size * supersample - 1) / 2.0
     coordinates = (np.arange(size * supersample) - centre) / (scale * supersample)  # unit-area units
-    offsets_rc = np.stack(np.meshgrid(coordinates, coordinates, indexing="ij"), axis=-1)
+    # The weight only where there is light: the sub-pixels the shape does not touch stay 0.
+    rows, cols = np.nonzero(fine)
+    offsets_rc = np.stack([coordinates[rows], coordinates[cols]], axis=-1)
     polygon = aperture.outline().polyline(max_chord_error)
     rho, gradient = radial_fraction(image_to_aperture(offsets_rc) - np.array([dx, dy]) / scale, polygon)
-    weight = 1.0 + aperture.rim * (2.0 * rho * rho - 1.0)
-    image = (fine * weight).reshape(size, supersample, size, supersample).sum(axis=(1, 3)) / supersample**2
+    weighted = np.zeros_like(fine)
+    weighted[rows, cols] = fine[rows, cols] * (1.0 + aperture.rim * (2.0 * rho * rho - 1.0))
+    image = weighted.reshape(size, supersample, size, supersample).sum(axis=(1, 3)) / supersample**2
     rho_max = 1.0 + gradient * math.sqrt(2.0) / (scale * supersample)  # sub-pixel centres just outside the edge
     lipschitz = 4.0 * abs(aperture.rim) * rho_max * gradient / scale  # per pixel
     h = 1.0 / supersample
