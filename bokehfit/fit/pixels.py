@@ -325,13 +325,35 @@ def disc_profile(
             cover, _ = rim_coverage(aperture, scale, size, field_position=where, supersample=RIM_FIT_SUPERSAMPLE,
                                     max_chord_error=1e-4, offset_xy=tuple(offset_xy))
         else:
-            cover = coverage(aperture, scale, size, offset_xy=tuple(offset_xy), field_position=where)
+            cover = coverage(_outline(aperture, where, covers), scale, size, offset_xy=tuple(offset_xy))
         cover = cover.astype(np.float32)
         if covers is not None:
             covers[key] = cover
-            while len(covers) * cover.nbytes > COVERS_BYTES and len(covers) > 1:
-                del covers[next(iter(covers))]  # the oldest
+            while (len(covers) - (_OUTLINES in covers)) * cover.nbytes > COVERS_BYTES and len(covers) > 2:
+                del covers[next(k for k in covers if k != _OUTLINES)]  # the oldest
     return cv2.GaussianBlur(cover, (0, 0), max(disc["blur_px"], BLUR_RANGE[0]), borderType=cv2.BORDER_REPLICATE)
+
+
+#: Key of :func:`disc_profile`'s ``covers`` under which the outlines of the latest apertures are kept.
+_OUTLINES = "outlines"
+#: Outlines kept there: a fit's steps that move only a disc (its centre, size or blur) reuse the
+#: aperture's outline, which for a vignetted one (the shape clipped by the barrel) costs more
+#: than the coverage.
+OUTLINES_KEPT = 32
+
+
+def _outline(aperture: Aperture, where: tuple[float, float] | None, covers: dict | None):
+    """``aperture.outline(where)``, from the memo in ``covers`` where there is one."""
+    if covers is None:
+        return aperture.outline(where)
+    outlines = covers.setdefault(_OUTLINES, {})
+    key = (aperture, None if where is None else tuple(where))
+    outline = outlines.get(key)
+    if outline is None:
+        outline = outlines[key] = aperture.outline(where)
+        if len(outlines) > OUTLINES_KEPT:
+            del outlines[next(iter(outlines))]  # the oldest
+    return outline
 
 
 def _search_bounds(parameter: ParameterSpec, start: float) -> tuple[float, float, float]:
