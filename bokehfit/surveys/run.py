@@ -1,8 +1,9 @@
 """Run a survey: hash the photos, skip what the database holds, farm the rest out, store each result.
 
 Two engines do the farming, both existing ones: :class:`concurrent.futures.ProcessPoolExecutor`
-on this machine (each worker process imports bokehfit and opens the GPU once,
-in its initializer) and a Dask ``distributed`` cluster. Whichever runs the
+on this machine (each worker process imports bokehfit once, in its initializer,
+and opens the GPU only if a photo's kernel needs it) and a Dask ``distributed``
+cluster. Whichever runs the
 photos, the parent process alone writes: the per-photo JSON and HTML reports
 (atomically, through :mod:`bokehfit.outputs`), then the photo's row, committed
 on its own, as each result arrives.
