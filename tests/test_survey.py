@@ -483,6 +483,46 @@ def test_a_pool_broken_between_a_result_and_the_next_submit_is_restarted(tmp_pat
     assert reasons == {"p0.png": "stand-in result from pool 1", **{f"p{k}.png": "stand-in result from pool 2" for k in (1, 2, 3)}}
 
 
+def test_local_workers_run_blas_on_one_thread_and_open_no_gpu_unasked(tmp_path):
+    """Each local worker starts with BLAS on one thread and OpenCV and lavapipe on its share of the
+    cores, the user's own settings kept; the parent's environment is left as it was; a worker whose
+    photos need no GPU opens none (no lavapipe threads)."""
+    import psutil
+
+    from bokehfit.surveys.run import _LocalEngine
+    from bokehfit.surveys.work import THREAD_VARIABLES, PhotoTask, thread_environment
+
+    before = {name: os.environ.get(name) for name in THREAD_VARIABLES}
+    (tmp_path / "g.jpg").write_bytes(b"this is not a JPEG\n")
+    engine = _LocalEngine(2, None)
+    try:
+        futures = [engine.submit(PhotoTask(str(tmp_path / "g.jpg"), f"sha{k}")) for k in range(2)]
+        assert [future.result(timeout=240)["status"] for future in futures] == ["unreadable", "unreadable"]
+        processes = list(engine.pool._processes.values())
+        assert len(processes) == 2
+        wanted = {**thread_environment(2, environ={}), **{n: v for n, v in before.items() if v is not None}}
+        for process in processes:
+            environ = psutil.Process(process.pid).environ()
+            assert {name: environ.get(name) for name in THREAD_VARIABLES} == wanted
+            tasks = Path(f"/proc/{process.pid}/task")
+            if tasks.is_dir():
+                names = [(task / "comm").read_text().strip() for task in tasks.iterdir()]
+                assert not [name for name in names if name.startswith("llvmpipe")], names
+    finally:
+        engine.close(False)
+    assert {name: os.environ.get(name) for name in THREAD_VARIABLES} == before
+
+
+def test_thread_environment_shares_the_cores_out(monkeypatch):
+    from bokehfit.surveys import work
+
+    monkeypatch.setattr(work, "usable_cores", lambda: 8)
+    assert work.thread_environment(2, environ={}) == {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
+                                                     "OPENCV_FOR_THREADS_NUM": "4", "LP_NUM_THREADS": "4"}
+    assert work.thread_environment(16, environ={})["OPENCV_FOR_THREADS_NUM"] == "1"
+    assert "OPENBLAS_NUM_THREADS" not in work.thread_environment(2, environ={"OPENBLAS_NUM_THREADS": "8"})
+
+
 def test_dask_local_cluster_gives_the_same_rows(surveyed, tmp_path):
     from distributed import LocalCluster
 

@@ -22,7 +22,7 @@ from pathlib import Path
 
 from bokehfit.errors import InputError, check_positive
 from bokehfit.surveys.store import SURVEY_SCHEMA_VERSION, SurveyStore, reports_folder
-from bokehfit.surveys.work import FAILURE_STATUSES, STATUSES
+from bokehfit.surveys.work import FAILURE_STATUSES, STATUSES, usable_cores
 
 __all__ = [
     "survey_table",
@@ -40,9 +40,7 @@ __all__ = [
 
 def default_jobs() -> int:
     """Worker processes by default: the CPU cores this process may use."""
-    if hasattr(os, "sched_getaffinity"):
-        return max(1, len(os.sched_getaffinity(0)))
-    return max(1, os.cpu_count() or 1)
+    return usable_cores()
 
 
 def check_compare_options(options: dict | None) -> dict:

@@ -1,9 +1,9 @@
 """Run a survey: hash the photos, skip what the database holds, farm the rest out, store each result.
 
 Two engines do the farming, both existing ones: :class:`concurrent.futures.ProcessPoolExecutor`
-on this machine (each worker process imports bokehfit once, in its initializer,
-and opens the GPU only if a photo's kernel needs it) and a Dask ``distributed``
-cluster. Whichever runs the
+on this machine (each worker process imports bokehfit once, in its initializer, opens
+the GPU only if a photo's kernel needs it, and runs its libraries' thread pools on its
+share of the cores) and a Dask ``distributed`` cluster. Whichever runs the
 photos, the parent process alone writes: the per-photo JSON and HTML reports
 (atomically, through :mod:`bokehfit.outputs`), then the photo's row, committed
 on its own, as each result arrives.
@@ -35,7 +35,7 @@ from bokehfit.outputs import encode_text, write_bytes_atomic, write_json
 from bokehfit.surveys.files import content_hash
 from bokehfit.surveys.scheduler import check_scheduler
 from bokehfit.surveys.store import SurveyStore, reports_folder, row_from_record
-from bokehfit.surveys.work import FAILURE_STATUSES, PhotoTask, init_worker, survey_photo
+from bokehfit.surveys.work import FAILURE_STATUSES, PhotoTask, init_worker, survey_photo, thread_environment
 
 __all__ = ["SurveyRun", "run_survey", "IN_FLIGHT_PER_WORKER", "MAX_WORKER_CRASHES"]
 
@@ -134,11 +134,33 @@ def _unimportable_main_hidden():
         main.__file__ = path
 
 
+@contextlib.contextmanager
+def _environment(variables: dict[str, str]):
+    """While inside, ``os.environ`` also holds ``variables``: processes started inside inherit them."""
+    saved = {name: os.environ.get(name) for name in variables}
+    os.environ.update(variables)
+    try:
+        yield
+    finally:
+        for name, value in saved.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
+
+
 class _LocalEngine:
-    """A process pool on this machine, rebuilt if a worker process dies."""
+    """A process pool on this machine, rebuilt if a worker process dies.
+
+    Each worker runs BLAS on one thread and OpenCV and lavapipe on its share of the
+    cores (:func:`~bokehfit.surveys.work.thread_environment`): the pools' sizes are read
+    from the environment as each library loads, so they are set in the environment each
+    worker process starts with (a spawned worker loads NumPy before its initializer runs).
+    """
 
     def __init__(self, jobs: int, adapter):
         self.jobs, self.adapter = jobs, adapter
+        self.threads = thread_environment(jobs)
         self.pool = self._new_pool()
         self.workers = jobs
 
@@ -147,13 +169,14 @@ class _LocalEngine:
         with _sigint_blocked():
             return concurrent.futures.ProcessPoolExecutor(
                 max_workers=self.jobs, mp_context=multiprocessing.get_context("spawn"),
-                initializer=init_worker, initargs=(self.adapter, True, os.getpid()),
+                initializer=init_worker, initargs=(self.adapter, True, os.getpid(), self.jobs),
             )
 
     def submit(self, task: PhotoTask):
         # the pool starts its processes as tasks arrive: they start with SIGINT blocked, so a
-        # Ctrl-C while one is starting can't stop it with a traceback before it ignores SIGINT
-        with _unimportable_main_hidden(), _sigint_blocked():
+        # Ctrl-C while one is starting can't stop it with a traceback before it ignores SIGINT,
+        # and with their share of the cores in their environment
+        with _unimportable_main_hidden(), _sigint_blocked(), _environment(self.threads):
             return self.pool.submit(survey_photo, task)
 
     def wait(self, futures):
@@ -201,8 +224,18 @@ class _DaskEngine:
             self.client = distributed.Client(scheduler, timeout=timeout_s) if self.own_client else scheduler
         except Exception as error:  # noqa: BLE001 - Dask raises many kinds (TLS without its configuration: TypeError)
             raise InputError(f"--scheduler {scheduler!r}: can't reach a Dask scheduler there ({' '.join(str(error).split())})") from None
-        self.workers = max(1, sum(self.client.nthreads().values()))
-        self.client.run(init_worker, adapter, False)
+        threads = self.client.nthreads()
+        self.workers = max(1, sum(threads.values()))
+        # each worker's thread pools get its share of its machine: the photos that machine's workers run at once
+        hosts = collections.defaultdict(list)
+        for address in threads:
+            try:
+                host = distributed.comm.get_address_host(address)
+            except (ValueError, TypeError):  # an address Dask can't read: a machine of its own
+                host = address
+            hosts[host].append(address)
+        for addresses in hosts.values():
+            self.client.run(init_worker, adapter, False, None, sum(threads[a] for a in addresses), workers=addresses)
 
     def submit(self, task: PhotoTask):
         data = Path(task.path).read_bytes()

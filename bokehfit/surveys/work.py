@@ -17,7 +17,21 @@ import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
-__all__ = ["PhotoTask", "FAILURE_STATUSES", "STATUSES", "init_worker", "survey_photo", "THUMBNAIL_PX", "PARENT_CHECK_S"]
+__all__ = [
+    "PhotoTask",
+    "FAILURE_STATUSES",
+    "STATUSES",
+    "init_worker",
+    "survey_photo",
+    "THUMBNAIL_PX",
+    "PARENT_CHECK_S",
+    "THREAD_VARIABLES",
+    "SINGLE_THREAD_VARIABLES",
+    "SHARED_THREAD_VARIABLES",
+    "usable_cores",
+    "worker_threads",
+    "thread_environment",
+]
 
 #: Statuses of a survey row besides compare's (design.md §7b): the file could not be read as a
 #: photo, compare raised (a bug or a lost GPU), or it ran past the per-photo time limit.
@@ -43,6 +57,43 @@ class PhotoTask:
     command_line: str = ""
     html: bool = True
     timeout_s: float | None = None
+
+
+#: Thread pools of one thread in every worker: OpenMP and BLAS (the OpenBLAS of NumPy and of SciPy,
+#: MKL), whose sizes are read from the environment as each library loads. The fit's matrices are
+#: small: a second OpenBLAS thread does none of the work and spins beside the worker (on a 512×384
+#: photo, 3 to 17 % more CPU time, the more so the idler the machine), and OpenBLAS's sums depend
+#: on its thread count (in the last digits), so at one a photo's numbers depend neither on the
+#: machine's cores, nor on ``--jobs``, nor on Dask (whose nanny starts its workers with these
+#: three at 1 too).
+SINGLE_THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+#: Thread pools sized to a worker's share of the cores: OpenCV's and lavapipe's (the CPU Vulkan
+#: driver); each starts a thread per core by default, so N workers on N cores would start N times
+#: as many as there are cores. Their results do not depend on the count.
+SHARED_THREAD_VARIABLES = ("OPENCV_FOR_THREADS_NUM", "LP_NUM_THREADS")
+THREAD_VARIABLES = SINGLE_THREAD_VARIABLES + SHARED_THREAD_VARIABLES
+
+
+def usable_cores() -> int:
+    """The CPU cores this process may use."""
+    if hasattr(os, "sched_getaffinity"):
+        return max(1, len(os.sched_getaffinity(0)))
+    return max(1, os.cpu_count() or 1)
+
+
+def worker_threads(workers: int) -> int:
+    """Threads each of ``workers`` photos run at once on this machine may use: its share of the usable cores, at least one."""
+    return max(1, usable_cores() // max(1, workers))
+
+
+def thread_environment(workers: int, environ=None) -> dict[str, str]:
+    """The thread-pool sizes (:data:`THREAD_VARIABLES`) of a worker process, one of ``workers`` on this machine.
+
+    Variables that ``environ`` (default ``os.environ``) already sets are left out: the user's word stands.
+    """
+    environ = os.environ if environ is None else environ
+    sizes = {name: 1 for name in SINGLE_THREAD_VARIABLES} | {name: worker_threads(workers) for name in SHARED_THREAD_VARIABLES}
+    return {name: str(size) for name, size in sizes.items() if name not in environ}
 
 
 #: The adapter choice of this worker's survey, set by :func:`init_worker` (None: the best one found).
@@ -84,13 +135,16 @@ def _die_with(parent_pid: int) -> None:
     threading.Thread(target=watch, name="bokehfit-parent-watch", daemon=True).start()
 
 
-def init_worker(adapter=None, ignore_sigint: bool = True, parent_pid: int | None = None) -> None:
-    """Per-process start-up: import bokehfit's pipeline once and note the GPU to use.
+def init_worker(adapter=None, ignore_sigint: bool = True, parent_pid: int | None = None, workers: int | None = None) -> None:
+    """Per-process start-up: import bokehfit's pipeline once, note the GPU to use, size the thread pools.
 
     The GPU is not opened here: most photos' kernels are drawn exactly, on the CPU,
     and a worker whose photo needs one opens it then (:func:`bokehfit.gpu.get_gpu`
     keeps it for the process), so a worker pays a device's start-up (0.7 s of CPU on
-    lavapipe, and a thread per core) only if a photo needs it.
+    lavapipe, and a thread per core) only if a photo needs it. ``workers``, the photos
+    this machine runs at once, sizes the OpenCV and lavapipe pools that the process's
+    environment does not (:func:`thread_environment`; a local pool starts its workers
+    with all of them set, a Dask nanny with the single-thread ones).
 
     In a local pool the worker also ignores SIGINT: Ctrl-C reaches the whole
     process group and the parent alone decides what stops (it starts the worker
@@ -106,6 +160,14 @@ def init_worker(adapter=None, ignore_sigint: bool = True, parent_pid: int | None
     if parent_pid is not None:
         _die_with(parent_pid)
     _ADAPTER = adapter
+    if workers is not None:
+        unset = thread_environment(workers)
+        if "LP_NUM_THREADS" in unset:  # read when the Vulkan driver loads, with the GPU's first use
+            os.environ["LP_NUM_THREADS"] = unset["LP_NUM_THREADS"]
+        if "OPENCV_FOR_THREADS_NUM" in unset:  # OpenCV may be loaded: set its pool itself
+            import cv2
+
+            cv2.setNumThreads(int(unset["OPENCV_FOR_THREADS_NUM"]))
     import bokehfit.compare  # noqa: F401  (the pipeline, imported once per process)
     import bokehfit.report.html  # noqa: F401
 
