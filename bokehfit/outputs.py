@@ -506,15 +506,18 @@ def _pause_for_tests() -> None:
 # --------------------------------------------------------------------------------------
 
 
-def write_atomic(path: str | os.PathLike, write: Callable[[Path], None]) -> None:
+def write_atomic(path: str | os.PathLike, write: Callable[[Path], None], *, sweep: bool = True) -> None:
     """Call ``write(temporary_path)``, then rename the temporary file to ``path``.
 
     Raises ``InputError`` (and writes nothing) if a file that bokehfit did not
     write is at ``path``. The temporary file is removed if anything fails; stale
-    ones of killed processes in the same folder are removed first.
+    ones of killed processes in the same folder are removed first, unless ``sweep``
+    is false: a writer of many files into one folder calls :func:`remove_stale_temporaries`
+    on it once instead (a folder's scan costs about 0.7 ms of CPU per 1000 files).
     """
     path = Path(path)
-    remove_stale_temporaries(path.parent)
+    if sweep:
+        remove_stale_temporaries(path.parent)
     check_replaceable(path)
     with _sigterm_raises():
         temporary = _new_temporary(path)
@@ -551,22 +554,25 @@ def replace_surrogates(text: str) -> str:
 _SURROGATE = re.compile("[\ud800-\udfff]")
 
 
-def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> None:
-    """Write ``data`` to ``path`` atomically, with bokehfit's mark added where the format has one."""
+def write_bytes_atomic(path: str | os.PathLike, data: bytes, *, sweep: bool = True) -> None:
+    """Write ``data`` to ``path`` atomically, with bokehfit's mark added where the format has one.
+
+    ``sweep``: as for :func:`write_atomic`.
+    """
     path = Path(path)
     stamp = _STAMPS.get(path.suffix.lower())
     data = stamp(bytes(data)) if stamp else bytes(data)
-    write_atomic(path, lambda tmp: tmp.write_bytes(data))
+    write_atomic(path, lambda tmp: tmp.write_bytes(data), sweep=sweep)
 
 
-def write_json(path: str | os.PathLike, data: dict) -> None:
-    """Write ``data`` as indented JSON, atomically.
+def write_json(path: str | os.PathLike, data: dict, *, sweep: bool = True) -> None:
+    """Write ``data`` as indented JSON, atomically (``sweep``: :func:`write_atomic`).
 
     ``bokehfit_version``, the mark of JSON outputs, is added first where ``data`` lacks it.
     """
     if "bokehfit_version" not in data:
         data = {"bokehfit_version": __version__, **data}
-    write_bytes_atomic(path, (json.dumps(data, indent=1, allow_nan=False) + "\n").encode("utf-8"))
+    write_bytes_atomic(path, (json.dumps(data, indent=1, allow_nan=False) + "\n").encode("utf-8"), sweep=sweep)
 
 
 def write_png(path: str | os.PathLike, image: np.ndarray) -> None:

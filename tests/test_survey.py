@@ -523,6 +523,34 @@ def test_thread_environment_shares_the_cores_out(monkeypatch):
     assert "OPENBLAS_NUM_THREADS" not in work.thread_environment(2, environ={"OPENBLAS_NUM_THREADS": "8"})
 
 
+def test_the_reports_folder_is_swept_once_a_run(tmp_path, monkeypatch):
+    """Killed writers' temporary files are removed from the reports folder before the run's first report,
+    and the reports are written without reading the folder again (two files a photo: a sweep each would
+    cost a survey time that grows with the square of its photos)."""
+    from bokehfit import outputs
+    from bokehfit.surveys import run as survey_run
+    from bokehfit.surveys.store import SurveyStore, reports_folder
+
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    folder = reports_folder(tmp_path / "s.duckdb")
+    folder.mkdir()
+    stale = folder / f".old.json.bokehfit-tmp-{dead.pid}-0123abcd.json"
+    stale.write_text("{")
+    sweeps = []
+    real = outputs.remove_stale_temporaries
+    monkeypatch.setattr(outputs, "remove_stale_temporaries", lambda f: sweeps.append(("writer", f)) or real(f))
+    monkeypatch.setattr(survey_run, "remove_stale_temporaries", lambda f: sweeps.append(("keeper", f)) or real(f))
+    with SurveyStore(tmp_path / "s.duckdb") as store:
+        keeper = survey_run._Keeper(store, {})
+        for k in range(3):
+            record = survey_run._failure(survey_run.PhotoTask(f"p{k}.jpg", f"{k:064x}"), "no_discs", "none")
+            keeper.keep({**record, "document": {"status": "no_discs"}, "html": "<p>none</p>"})
+    assert sweeps == [("keeper", folder)]
+    assert not stale.exists()
+    assert len(list(folder.glob("*.json"))) == 3 and len(list(folder.glob("*.html"))) == 3
+
+
 def test_dask_local_cluster_gives_the_same_rows(surveyed, tmp_path):
     from distributed import LocalCluster
 

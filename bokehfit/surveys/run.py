@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from bokehfit.errors import InputError
-from bokehfit.outputs import encode_text, write_bytes_atomic, write_json
+from bokehfit.outputs import encode_text, remove_stale_temporaries, write_bytes_atomic, write_json
 from bokehfit.surveys.files import content_hash
 from bokehfit.surveys.scheduler import check_scheduler
 from bokehfit.surveys.store import SurveyStore, reports_folder, row_from_record
@@ -86,23 +86,32 @@ def _safe_stem(path: str) -> str:
 
 
 class _Keeper:
-    """The parent's one writer: per-photo reports, then the row."""
+    """The parent's one writer: per-photo reports, then the row.
+
+    The reports folder is swept of killed writers' temporary files once, before the
+    first report of the run, not before each: it holds two files a photo, and a sweep
+    reads the whole folder (20 000 files: 14 ms of CPU, twice a photo).
+    """
 
     def __init__(self, store: SurveyStore, sizes: dict[str, int | None]):
         self.store, self.sizes = store, sizes
         self.folder = reports_folder(store.path)
+        self.swept = False
 
     def keep(self, record: dict) -> str:
         json_path = html_path = None
         document = record.get("document")
         if document is not None:
             self.folder.mkdir(exist_ok=True)
+            if not self.swept:
+                remove_stale_temporaries(self.folder)
+                self.swept = True
             name = f"{_safe_stem(record['path'])}-{record['sha256'][:12]}"
             json_path = f"{self.folder.name}/{name}.json"
-            write_json(self.store.path.parent / json_path, document)
+            write_json(self.store.path.parent / json_path, document, sweep=False)
             if record.get("html") is not None:
                 html_path = f"{self.folder.name}/{name}.html"
-                write_bytes_atomic(self.store.path.parent / html_path, encode_text(record["html"]))
+                write_bytes_atomic(self.store.path.parent / html_path, encode_text(record["html"]), sweep=False)
         row = row_from_record(record, size_bytes=self.sizes.get(record["sha256"]), json_path=json_path, html_path=html_path)
         self.store.put(row)
         return row["status"]
