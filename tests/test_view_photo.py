@@ -283,7 +283,8 @@ def test_page_steers_the_fit_like_compare_discs(browser, server, artifacts, tmp_
     assert page.evaluate("document.body.dataset.used") == str(sum(d["used"] for d in document["discs"]))
     page.click("#shapes summary")  # folds the list again
     page.click("#candidates tbody tr[data-role='used']")
-    assert page.locator("#match img").count() == 3
+    page.wait_for_function("['ready', 'fallback'].includes(document.body.dataset.kernel)", timeout=PAGE_TIMEOUT_MS)
+    assert page.locator("#match canvas, #match img").count() == 3
     page.evaluate("document.getElementById('side').scrollTop = 0")
     save_screenshot(page, artifacts)
 
@@ -313,3 +314,180 @@ def save_screenshot(page, artifacts: Path) -> None:
     path = artifacts / "viewer_photo.png"
     page.screenshot(path=str(path))
     print(f"screenshot: {path}")
+
+
+# --- the matched kernel, drawn in the browser by the WGSL kernel renderer ---------------------------
+
+
+def test_kernel_renderer_is_served_as_the_package_compiles_it(server):
+    from bokehfit.gpu.shaders import APERTURE_PARAMS
+    from bokehfit.kernels.mc import KERNEL_PARAMS, kernel_mc_source
+
+    status, source = request(server, "GET", "/photo/kernel_mc.wgsl")
+    assert status == 200 and source.decode() == kernel_mc_source()
+    kernel = json.loads(request(server, "GET", "/photo/info.json")[1])["kernel"]
+    assert kernel["params"] == KERNEL_PARAMS.layout_json() and kernel["aperture"] == APERTURE_PARAMS.layout_json()
+    assert set(kernel["bindings"]) == {"params", "counts", "aperture", "mask_table"}
+
+
+def _half_mask(image) -> "np.ndarray":
+    """Pixels at or above half the disc's plateau (its 90th percentile of lit pixels)."""
+    import numpy as np
+
+    lit = image[image > 0]
+    return image >= 0.5 * np.percentile(lit, 90)
+
+
+def _centroid(mask):
+    import numpy as np
+
+    rows, cols = np.nonzero(mask)
+    return np.array([cols.mean(), rows.mean()])
+
+
+def test_page_draws_the_matched_kernel_with_the_wgsl_renderer(browser, server, artifacts):  # noqa: F811
+    """The selected disc's kernel from kernel_mc.wgsl in Chromium (WebGPU) is the fitted aperture's, as
+    ``render_kernel`` draws it from the compare JSON; the model and residual follow the Python ones."""
+    import base64
+    import io
+
+    import cv2
+    import numpy as np
+    from PIL import Image
+
+    from bokehfit.apertures import make_aperture
+    from bokehfit.fit.pixels import field_position, model_window
+    from bokehfit.kernels import render_kernel
+    from bokehfit.view import settings_from_compare
+    from test_view import _need
+
+    page = open_photo_page(browser, server)
+    job = server.photo.auto_job
+    document = result(server, job)
+    tiles = json.loads(request(server, "GET", f"/photo/tiles.json?job={job}")[1])["tiles"]
+    disc = max((d for d in document["discs"] if str(d["index"]) in tiles), key=lambda d: d["diameter_px"])
+    page.click(f"#candidates tbody tr[data-index='{disc['index']}']")
+    page.wait_for_function("['ready', 'fallback'].includes(document.body.dataset.kernel)", timeout=PAGE_TIMEOUT_MS)
+    if page.evaluate("document.body.dataset.kernel") == "fallback":
+        note = page.text_content("#match-note")
+        assert page.locator("#match img").count() == 3 and "drawn in Python" in note
+        page.close()
+        _need(f"headless chromium has no usable WebGPU here: {note}")
+    drawn = page.evaluate("window.photoView.kernel")
+    tile = tiles[str(disc["index"])]["kernel"]
+    size = tile["size"]
+    assert drawn["index"] == disc["index"] and drawn["size"] == size
+    kernel = np.asarray(drawn["kernel"], dtype=np.float64).reshape(size, size)
+
+    # The compare JSON's aperture, at the disc's diameter and place in the frame, drawn exactly in Python.
+    settings = settings_from_compare(document)
+    aperture = make_aperture(settings["shape"], settings["angle_deg"], blades=settings["blades"], aspect=settings["aspect"],
+                             roundness=settings["roundness"], squeeze=settings["squeeze"], rim=settings["rim"],
+                             vignetting=settings["vignetting"], chromatic=settings["chromatic"])
+    width, height = document["input"]["width"], document["input"]["height"]
+    where = field_position(disc["center_xy"], (height, width))
+    reference = render_kernel(aperture, diameter_px=tile["diameter_px"], size=size, method="exact", field_position=where)
+    if reference.ndim == 3:
+        reference = reference[..., 1]
+    assert abs(kernel.sum() - 1) < 1e-4
+    ours, theirs = _half_mask(kernel), _half_mask(reference)
+    iou = (ours & theirs).sum() / (ours | theirs).sum()
+    offset = np.hypot(*(_centroid(ours) - _centroid(theirs)))
+    print(f"disc {disc['index']}: {size} px, D {tile['diameter_px']:.2f} px, IoU of the half masks {iou:.4f}, "
+          f"centroids {offset:.3f} px apart; {drawn['samples']} samples in {drawn['ms']:.0f} ms")
+    assert iou >= 0.95 and offset <= 1.0
+    assert np.abs(kernel - reference).sum() < 0.1  # L1 of two unit-area kernels
+
+    # The page's model (at the fitted centre, blur and levels) against the model drawn in Python: same disc.
+    model = np.asarray(drawn["model"], dtype=np.float64).reshape(size, size)
+    low, high = tile["background"], tile["plateau"]
+    ours = cv2.resize((model >= 0.5 * (low + high)).astype(np.uint8), (96, 96), interpolation=cv2.INTER_NEAREST) > 0
+    python = np.asarray(Image.open(io.BytesIO(base64.b64decode(tiles[str(disc["index"])]["model"].split(",", 1)[1]))).convert("L"))
+    theirs = python >= round(np.sqrt(0.5) * 255)
+    iou = (ours & theirs).sum() / (ours | theirs).sum()
+    assert iou >= 0.9
+    # ... pixel by pixel, against the fit's own model (model_window, as the tiles draw it) on the same crop.
+    comparison = compare_photo(EXAMPLE)
+    fitted = next(item.fits[comparison.fit.family.name] for item in comparison.fit.disc_fits if item.disc.index == disc["index"])
+    factor = tile["factor"]
+    python = model_window(fitted, tile["left"], tile["top"], size * factor).reshape(size, factor, size, factor).mean(axis=(1, 3))
+    difference = np.abs(model - python) / (high - low)
+    print(f"model against Python's: IoU of the half masks {iou:.4f}, mean |difference| {difference.mean():.4f}, "
+          f"largest {difference.max():.4f} of the contrast; residual RMS {drawn['residual_rms']:.4f}")
+    assert difference.mean() < 0.01 and difference.max() < 0.1 and drawn["residual_rms"] < 0.05
+
+    # What the canvas shows is that model, through the report's grey scale.
+    url = page.evaluate("document.getElementById('match-kernel').toDataURL('image/png')")
+    shown = np.asarray(Image.open(io.BytesIO(base64.b64decode(url.split(",", 1)[1]))).convert("L"), dtype=np.float64)
+    expected = np.round(np.sqrt(np.clip((model - low) / (high - low), 0, 1)) * 255)
+    assert shown.shape == (size, size) and np.abs(shown - expected).max() <= 1
+    assert page.locator("#match canvas").count() == 3 and "kernel_mc.wgsl" in page.text_content("#match-note")
+    page.evaluate("document.getElementById('side').scrollTop = 0")
+    path = artifacts / "viewer_photo_kernel.png"
+    page.screenshot(path=str(path))
+    print(f"screenshot: {path}")
+    assert page.errors == []
+    page.close()
+
+
+@pytest.mark.parametrize(
+    ("shape", "features"),
+    [
+        ("ngon", {"blades": 7, "roundness": 0.5, "rim": 0.4, "squeeze": 1.3, "vignetting": {"radius": 1.0, "shift": 0.9}}),
+        ("pentagon", {"chromatic": {"red": 0.06, "blue": -0.05}, "rim": -0.3}),
+    ],
+    ids=["cat-eye-rim-rounded-squeezed", "chromatic"],
+)
+def test_page_kernel_draws_the_real_lens_features(browser, server, shape, features):  # noqa: F811
+    """The page's kernel renderer, on an aperture with the cat-eye cut at a field position, the rim,
+    rounded blades, squeeze or colour, packed as the tiles are: as ``render_kernel`` draws it, per channel."""
+    import math
+
+    import numpy as np
+
+    from bokehfit.apertures import make_aperture
+    from bokehfit.kernels import render_kernel
+    from test_view import _need
+
+    page = open_photo_page(browser, server)
+    aperture = make_aperture(shape, 25.0, **features)
+    where, size, diameter = (0.6, -0.45), 81, 50.0
+    assert aperture.vignetting is None or aperture.area(where) < 0.6  # the cat-eye cut takes more than 40 % here
+    strata = math.isqrt(int(256 * math.pi * diameter**2 / 4))
+    values = aperture.shader_params(where)
+    tile = {"size": size, "samples": strata * strata, "strata": strata, "scale": diameter * math.sqrt(math.pi) / 2,
+            "aperture": {k: list(v) if isinstance(v, tuple) else v for k, v in values.items()},
+            "chromatic": None if aperture.chromatic is None else [aperture.chromatic.red, aperture.chromatic.blue],
+            "center": [(size - 1) / 2] * 2, "blur_px": 0.05}
+    drawn = page.evaluate("(tile) => window.photoView.drawTile(tile)", tile)
+    if "error" in drawn:
+        page.close()
+        _need(f"headless chromium has no usable WebGPU here: {drawn['error']}")
+    reference = render_kernel(aperture, diameter_px=diameter, size=size, method="exact", field_position=where)
+    reference = reference[..., None] if reference.ndim == 2 else reference
+    assert len(drawn["kernels"]) == reference.shape[-1]
+    rows, cols = np.mgrid[0:size, 0:size]
+    for channel, kernel in enumerate(drawn["kernels"]):
+        ours, theirs = np.asarray(kernel).reshape(size, size), reference[..., channel]
+        l1 = np.abs(ours - theirs).sum()
+        moved = [abs((ours * axis).sum() - (theirs * axis).sum()) for axis in (cols, rows)]
+        print(f"{shape} channel {channel}: L1 {l1:.4f}, centroids {moved[0]:.3f}, {moved[1]:.3f} px apart")
+        assert l1 < 0.1 and max(moved) < 0.25
+    assert page.errors == []
+    page.close()
+
+
+def test_without_webgpu_the_page_shows_the_python_model_and_says_so(browser, server):  # noqa: F811
+    page = browser.new_page()
+    errors = []
+    page.on("pageerror", lambda error: errors.append(str(error)))
+    page.add_init_script("delete Navigator.prototype.gpu")
+    page.goto(server.photo_url)
+    page.wait_for_function("document.body.dataset.ready === 'true'", timeout=PAGE_TIMEOUT_MS)
+    page.click("#candidates tbody tr[data-role='used']")
+    page.wait_for_function("document.body.dataset.kernel === 'fallback'", timeout=PAGE_TIMEOUT_MS)
+    assert page.locator("#match img").count() == 3 and page.locator("#match canvas").count() == 0
+    note = page.text_content("#match-note")
+    assert "navigator.gpu is missing" in note and "drawn in Python" in note
+    assert errors == []
+    page.close()

@@ -15,7 +15,9 @@ after ``MAX_REFIT_S``; the page polls its progress and may cancel it (the
 worker is killed and a fresh one started). Each finished compare keeps its
 ``compare --json`` document, its HTML report (the same
 :class:`~bokehfit.compare.Comparison` renders both) and, per fitted disc, the
-photo's crop, the fitted model at that place and their residual as PNGs.
+photo's crop, the fitted model at that place and their residual as PNGs, and
+what the page needs to draw that disc's kernel itself with the project's WGSL
+kernel renderer (:func:`kernel_tile`; the PNGs are its fallback without WebGPU).
 """
 
 from __future__ import annotations
@@ -34,7 +36,7 @@ import numpy as np
 
 from bokehfit.errors import InputError
 
-__all__ = ["MAX_REFIT_DISCS", "MAX_REFIT_S", "MAX_DISPLAY_SIDE", "PhotoSession", "refit_labels", "discs_file"]
+__all__ = ["MAX_REFIT_DISCS", "MAX_REFIT_S", "MAX_DISPLAY_SIDE", "PhotoSession", "discs_file", "kernel_tile", "refit_labels"]
 
 #: Most places in one refit (a photo's usable discs are tens; the fit uses at most 12 of them).
 MAX_REFIT_DISCS = 64
@@ -51,6 +53,12 @@ TILE_PX = 96
 RESIDUAL_SPAN = 0.25
 #: Tiles made per result (the fitted discs, largest first).
 MAX_TILES = 16
+#: Longest side of the crop the page draws the kernel on (pixels): wider crops are area-reduced
+#: by an integer factor, the disc's size, centre and blur with them.
+KERNEL_CROP_SIDE = 160
+#: Monte-Carlo samples per pixel of the disc's area for the page's kernel, and their bounds.
+KERNEL_SAMPLES_PER_PX = 256
+KERNEL_SAMPLES = (2**16, 2**21)
 
 
 # --- the work done in the worker process ------------------------------------------------------
@@ -87,8 +95,54 @@ def _tiles(comparison) -> dict[str, dict]:
             "photo": _png_uri(_grey8(crop, low, high, TILE_PX)),
             "model": _png_uri(_grey8(model, low, high, TILE_PX)),
             "residual": _png_uri(_residual8(crop - model, RESIDUAL_SPAN * (high - low), TILE_PX)),
+            "kernel": kernel_tile(fitted, crop, left, top),
         }
     return tiles
+
+
+def kernel_tile(fitted, crop: np.ndarray, left: int, top: int) -> dict:
+    """What the page needs to draw one fitted disc's kernel on the GPU (``kernel_mc.wgsl``) beside its crop.
+
+    The crop (``left``, ``top``: its top-left pixel in the photo), area-reduced by an integer
+    ``factor`` where it is wider than :data:`KERNEL_CROP_SIDE`, as uint16 between ``crop_range``
+    (base64, rows top first); the disc in the reduced crop's pixels: its centre (pixel-centre
+    coordinates, x right, y down), equal-area diameter, edge blur and the kernel's ``scale``
+    (design.md §4: d·√π/2); its levels; and the fitted aperture's ``ApertureParams`` values at the
+    disc's field position (:meth:`Aperture.shader_params`), which the page packs with the served
+    layout. ``samples`` and ``strata``: the stratified Monte-Carlo count (m² samples).
+    """
+    side = crop.shape[0]
+    factor = max(1, math.ceil(side / KERNEL_CROP_SIDE))
+    size = side // factor
+    reduced = crop[: size * factor, : size * factor].reshape(size, factor, size, factor).mean(axis=(1, 3))
+    low, high = float(reduced.min()), float(reduced.max())
+    quantised = np.round((reduced - low) / max(high - low, 1e-12) * 65535.0).astype("<u2")
+    # Pixel (j) of the reduced crop averages full pixels j·f .. j·f + f − 1: its centre is at j·f + (f − 1)/2.
+    centre = [(fitted.center_xy[0] - left - (factor - 1) / 2) / factor, (fitted.center_xy[1] - top - (factor - 1) / 2) / factor]
+    diameter = fitted.diameter_px / factor
+    strata = math.isqrt(int(min(max(KERNEL_SAMPLES_PER_PX * math.pi * diameter * diameter / 4, KERNEL_SAMPLES[0]),
+                                KERNEL_SAMPLES[1])))
+    values = fitted.aperture.shader_params(fitted.field_position)
+    return {
+        "size": size,
+        "factor": factor,
+        "left": left,
+        "top": top,
+        "center": centre,
+        "diameter_px": diameter,
+        "scale": diameter * math.sqrt(math.pi) / 2.0,
+        "blur_px": fitted.blur_px / factor,
+        "plateau": float(fitted.plateau),
+        "background": float(fitted.background),
+        "field_position": None if fitted.field_position is None else [float(v) for v in fitted.field_position],
+        "aperture": {name: (list(value) if isinstance(value, tuple) else value) for name, value in values.items()},
+        "chromatic": None if fitted.aperture.chromatic is None else [fitted.aperture.chromatic.red, fitted.aperture.chromatic.blue],
+        "samples": strata * strata,
+        "strata": strata,
+        "crop": base64.b64encode(quantised.tobytes()).decode("ascii"),
+        "crop_range": [low, high],
+        "residual_span": RESIDUAL_SPAN * (max(fitted.plateau, fitted.background + 1e-6) - fitted.background),
+    }
 
 
 def _run_compare(path: str, labels, shapes, progress) -> dict:

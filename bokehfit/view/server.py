@@ -50,9 +50,16 @@ Routes
 ``GET /photo``, ``/photo.js``; ``/photo/info.json``, ``/photo/image.jpg``
     With a photo (``bokehfit view PHOTO``, :mod:`bokehfit.view.photo`): its page,
     its name, size, sha256 and the shapes a refit may try, and its display copy.
+    ``info.json`` also says how to run the kernel renderer (:func:`kernel_config`).
+``GET /photo/kernel_mc.wgsl``
+    The Monte-Carlo kernel renderer (``shaders/kernel_mc.wgsl``, every include
+    resolved, as :mod:`bokehfit.kernels.mc` compiles it): the page draws each
+    fitted disc's kernel with it, packing its ``KernelParams`` and ``ApertureParams``
+    by the layouts in ``info.json``.
 ``GET /photo/job?job=N``, ``/photo/result.json?job=N``, ``/photo/tiles.json?job=N``, ``/photo/report.html?job=N``
     A compare's state (running with its stage, done, failed, cancelled); once
-    done, its ``compare --json`` document, its disc tiles and aperture diagram,
+    done, its ``compare --json`` document, its disc tiles (with what the kernel
+    needs: :func:`bokehfit.view.photo.kernel_tile`) and aperture diagram,
     and its HTML report (job 0, the default: the automatic compare).
 ``POST /photo/refit``, ``/photo/cancel``, ``/photo/discs-file``
     Start a compare on exactly the page's discs (``{"discs": [{"center_xy":
@@ -244,7 +251,8 @@ _PHOTO_STATIC = {
     "/photo.js": ("photo.js", "text/javascript; charset=utf-8"),
 }
 #: The photo's routes: GET for the photo, its results and a refit's state; POST for the writes.
-_PHOTO_GET = ("/photo/info.json", "/photo/image.jpg", "/photo/job", "/photo/result.json", "/photo/tiles.json", "/photo/report.html")
+_PHOTO_GET = ("/photo/info.json", "/photo/image.jpg", "/photo/job", "/photo/result.json", "/photo/tiles.json", "/photo/report.html",
+              "/photo/kernel_mc.wgsl")
 _PHOTO_POST = ("/photo/refit", "/photo/cancel", "/photo/discs-file")
 #: The scalar types whose components the page packs (viewer.js, ``Renderer.setValues``).
 _PAGE_SCALARS = ("f32", "u32", "i32")
@@ -311,7 +319,8 @@ def display_source() -> str:
     return load_shader("display.wgsl", {"RenderParams": RENDER_PARAMS.wgsl(), "interface": DISPLAY_INTERFACE.wgsl()})
 
 
-def _shader_interface(source: str, interface: ComputeInterface = PATHTRACE_INTERFACE, filename: str = "pathtrace.wgsl") -> dict:
+def _shader_interface(source: str, interface: ComputeInterface = PATHTRACE_INTERFACE, filename: str = "pathtrace.wgsl",
+                      required: tuple[str, ...] = ("params", "accum")) -> dict:
     """Entry point and bindings of the compute shader, read from its text; its workgroup size (``interface``)."""
     entry = re.search(r"@compute\s+@workgroup_size\([^)]*\)\s*fn\s+(\w+)", source)
     if entry is None:
@@ -323,10 +332,31 @@ def _shader_interface(source: str, interface: ComputeInterface = PATHTRACE_INTER
             r"@group\((\d+)\)\s*@binding\((\d+)\)\s*var<\s*(\w+)[^>]*>\s*(\w+)\s*:", source
         )
     }
-    for binding in ("params", "accum"):
+    for binding in required:
         if binding not in bindings:
             raise RuntimeError(f"{filename} declares no binding {binding!r}")
     return {"entry_point": entry.group(1), "workgroup_size": size, "bindings": bindings}
+
+
+@lru_cache(maxsize=1)
+def kernel_source() -> str:
+    """The Monte-Carlo kernel renderer's WGSL (``shaders/kernel_mc.wgsl``, every include resolved), as
+    :mod:`bokehfit.kernels.mc` compiles it: the photo page draws each disc's kernel with it."""
+    from bokehfit.kernels.mc import kernel_mc_source
+
+    return kernel_mc_source()
+
+
+def kernel_config() -> dict:
+    """How the photo page runs ``kernel_mc.wgsl`` (in ``/photo/info.json``): its URL, entry point,
+    workgroup size and bindings, and the layouts of its ``KernelParams`` and ``ApertureParams``."""
+    from bokehfit.gpu.shaders import APERTURE_PARAMS
+    from bokehfit.kernels.mc import KERNEL_INTERFACE, KERNEL_PARAMS
+
+    interface = _shader_interface(kernel_source(), KERNEL_INTERFACE, "kernel_mc.wgsl",
+                                  required=("params", "counts", "aperture", "mask_table"))
+    return {"url": "/photo/kernel_mc.wgsl", **interface, "params": uniform_layout(KERNEL_PARAMS),
+            "aperture": uniform_layout(APERTURE_PARAMS)}
 
 
 def uniform_layout(struct: Struct = RENDER_PARAMS) -> dict:
@@ -1305,7 +1335,9 @@ class _Handler(BaseHTTPRequestHandler):
             name, content_type = _PHOTO_STATIC[url.path]
             return self._send(HTTPStatus.OK, self.server.photo_page if name == "photo.html" else _static_file(name), content_type)
         if url.path == "/photo/info.json":
-            return self._json(HTTPStatus.OK, session.info())
+            return self._json(HTTPStatus.OK, {**session.info(), "kernel": kernel_config()})
+        if url.path == "/photo/kernel_mc.wgsl":
+            return self._send(HTTPStatus.OK, kernel_source().encode("utf-8"), "text/wgsl; charset=utf-8")
         if url.path == "/photo/image.jpg":
             return self._send(HTTPStatus.OK, session.display_jpeg, "image/jpeg")
         query = parse_qs(url.query)

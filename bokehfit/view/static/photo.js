@@ -1,7 +1,8 @@
 // photo.js: `bokehfit view PHOTO`. The photo with every candidate outlined, the verdict, the fitted
 // aperture and the candidates' table, all read from the server's `compare --json` document of the
 // fit shown (never recomputed here); the person's picks, sent to POST /photo/refit, which fits
-// exactly those discs (compare --discs semantics) in a worker the page polls and may cancel.
+// exactly those discs (compare --discs semantics) in a worker the page polls and may cancel. The
+// selected disc's kernel is drawn in the browser by the project's WGSL kernel renderer (WebGPU).
 
 const TOKEN = document.querySelector('meta[name="bokehfit-token"]').content;
 const COLOURS = { used: "#009e73", usable: "#56b4e9", rejected: "#d55e00", dropped: "#999999", added: "#ffffff" };
@@ -289,6 +290,218 @@ function showTip(event, mark) {
   tip.hidden = false;
 }
 
+// --- the matched kernel, drawn on the GPU by the project's kernel renderer ------------------------
+// The selected disc's kernel is drawn by kernel_mc.wgsl (served as /photo/kernel_mc.wgsl, the WGSL that
+// bokehfit.kernels.mc compiles; its aperture samplers are shaders/apertures.wgsl): stratified samples
+// of the fitted aperture (shape, angle, roundness, squeeze, rim, the vignetting's cut at the disc's
+// field position) counted in the pixels they land in. Its KernelParams and ApertureParams are packed
+// by the layouts in /photo/info.json, with the values of the disc's tile (the fit's own aperture, from
+// Aperture.shader_params on the server). Here the counts become the disc's coverage, are moved to the
+// fitted centre, blurred by the fitted edge blur and given the fitted levels: the model, and the residual.
+
+const SETTERS = { f32: "setFloat32", u32: "setUint32", i32: "setInt32" };
+// cv2.GaussianBlur's reach for float images (4 sigma) and the fit's smallest blur (fit/pixels.py BLUR_RANGE).
+const BLUR_REACH = 4;
+const MIN_BLUR_PX = 0.05;
+// kernel_mc.py: samples each thread draws at most, to size the dispatch.
+const SAMPLES_PER_THREAD = 16;
+
+function pack(layout, values, what) {
+  const bytes = new ArrayBuffer(layout.size_bytes);
+  const view = new DataView(bytes);
+  for (const f of layout.fields) {
+    const v = values[f.name];
+    if (v === undefined || v === null) throw new Error(`${what} lacks ${layout.name}.${f.name}`);
+    const components = f.components === 1 ? [v] : v;
+    if (!Array.isArray(components) || components.length !== f.components) throw new Error(`${layout.name}.${f.name} is a ${f.type}`);
+    const setter = SETTERS[f.scalar];
+    if (!setter) throw new Error(`${layout.name}.${f.name}: unknown type ${f.type}`);
+    components.forEach((c, i) => view[setter](f.offset + 4 * i, c, true));
+  }
+  return bytes;
+}
+
+class KernelRenderer {
+  static async create(config) {
+    if (!navigator.gpu) throw new Error("navigator.gpu is missing: WebGPU is off or unsupported here");
+    const adapter = await navigator.gpu.requestAdapter();
+    if (!adapter) throw new Error("navigator.gpu.requestAdapter() found no adapter");
+    const device = await adapter.requestDevice();
+    const response = await fetch(config.url, { cache: "no-store" });
+    if (!response.ok) throw new Error(`${config.url}: ${response.status}`);
+    const module = device.createShaderModule({ label: "kernel_mc", code: await response.text() });
+    const info = await module.getCompilationInfo();
+    const errors = info.messages.filter((m) => m.type === "error");
+    if (errors.length) throw new Error("kernel_mc.wgsl does not compile here: " + errors.map((m) => `${m.lineNum}:${m.linePos} ${m.message}`).join("; "));
+    device.pushErrorScope("validation");
+    const pipeline = await device.createComputePipelineAsync({ label: "kernel_mc", layout: "auto", compute: { module, entryPoint: config.entry_point } });
+    const error = await device.popErrorScope();
+    if (error) throw new Error(`kernel_mc.wgsl: ${error.message}`);
+    const info2 = adapter.info || {};
+    return new KernelRenderer(config, device, pipeline, [info2.vendor, info2.architecture, info2.description].filter(Boolean).join(" ") || "WebGPU");
+  }
+
+  constructor(config, device, pipeline, adapterName) {
+    Object.assign(this, { config, device, pipeline, adapterName, lost: null });
+    device.lost.then((info) => { this.lost = info.message || info.reason || "device lost"; });
+    // A mask aperture's CDF tables go here; the fitted families are shapes, so one float (as kernel_mc.py binds).
+    this.maskTable = device.createBuffer({ label: "mask_table", size: 4, usage: GPUBufferUsage.STORAGE });
+  }
+
+  // The histogram of `samples` stratified aperture samples scaled by `scale` on a size × size frame (kernel_mc.wgsl).
+  async counts(tile, scale) {
+    if (this.lost) throw new Error(`the GPU was lost: ${this.lost}`);
+    const { device, config } = this;
+    const size = tile.size;
+    const params = pack(config.params, { size, samples: tile.samples, strata: tile.strata, stratified: 1, seed: 0, scale,
+      row_first: 0, rows: size }, "the kernel's parameters");
+    const aperture = pack(config.aperture, tile.aperture, "the disc's tile");
+    const uniform = (bytes, label) => {
+      const buffer = device.createBuffer({ label, size: bytes.byteLength, usage: GPUBufferUsage.UNIFORM | GPUBufferUsage.COPY_DST });
+      device.queue.writeBuffer(buffer, 0, bytes);
+      return buffer;
+    };
+    const buffers = { params: uniform(params, "params"), aperture: uniform(aperture, "aperture"), mask_table: this.maskTable };
+    buffers.counts = device.createBuffer({ label: "counts", size: 4 * size * size, usage: GPUBufferUsage.STORAGE | GPUBufferUsage.COPY_SRC });
+    const readback = device.createBuffer({ label: "readback", size: 4 * size * size, usage: GPUBufferUsage.MAP_READ | GPUBufferUsage.COPY_DST });
+    const entries = Object.entries(config.bindings).map(([name, b]) => ({ binding: b.binding, resource: { buffer: buffers[name] } }));
+    device.pushErrorScope("validation");
+    const group = device.createBindGroup({ layout: this.pipeline.getBindGroupLayout(0), entries });
+    const threads = config.workgroup_size.reduce((a, b) => a * b, 1);
+    const groups = Math.max(1, Math.min(Math.ceil(tile.samples / (threads * SAMPLES_PER_THREAD)), device.limits.maxComputeWorkgroupsPerDimension));
+    const encoder = device.createCommandEncoder();
+    const pass = encoder.beginComputePass();
+    pass.setPipeline(this.pipeline);
+    pass.setBindGroup(0, group);
+    pass.dispatchWorkgroups(groups);
+    pass.end();
+    encoder.copyBufferToBuffer(buffers.counts, 0, readback, 0, 4 * size * size);
+    device.queue.submit([encoder.finish()]);
+    const error = await device.popErrorScope();
+    if (error) throw new Error(`kernel_mc.wgsl: ${error.message}`);
+    await readback.mapAsync(GPUMapMode.READ);
+    const counts = new Uint32Array(readback.getMappedRange().slice(0));
+    readback.unmap();
+    for (const b of [readback, buffers.counts, buffers.params, buffers.aperture]) b.destroy();
+    return counts;
+  }
+
+  // The disc's model on its crop: per channel (green, or red, green, blue with colour) the coverage,
+  // at the fitted centre, blurred; and each channel's unit-area kernel as drawn (centred, for the tests).
+  async draw(tile) {
+    const start = performance.now();
+    const scales = tile.chromatic ? [1 + tile.chromatic[0], 1, 1 + tile.chromatic[1]] : [1];
+    const channels = [];
+    const kernels = [];
+    for (const s of scales) {
+      const counts = await this.counts(tile, tile.scale * s);
+      // Each sample stands for scale² / samples of the unit-area aperture's area, in pixels.
+      const area = (tile.scale * s) ** 2 / tile.samples;
+      const cover = Float32Array.from(counts, (c) => c * area);
+      let total = 0;
+      for (const c of counts) total += c;
+      kernels.push(Float32Array.from(counts, (c) => c / Math.max(total, 1)));
+      // To the fitted centre: a bilinear move by (dx, dy) spreads each axis by the variance f (1 − f) of its
+      // fraction f, which the blur then leaves out (where it can): the two give the fitted blur's spread.
+      const centre = (tile.size - 1) / 2;
+      const [dx, dy] = [tile.center[0] - centre, tile.center[1] - centre];
+      const sigma = Math.max(tile.blur_px, MIN_BLUR_PX);
+      const rest = (d) => { const f = d - Math.floor(d); return Math.sqrt(Math.max(sigma * sigma - f * (1 - f), MIN_BLUR_PX * MIN_BLUR_PX)); };
+      channels.push(blur(shift(cover, tile.size, dx, dy), tile.size, rest(dx), rest(dy)));
+    }
+    return { kernel: kernels[kernels.length === 3 ? 1 : 0], kernels, channels, ms: performance.now() - start };
+  }
+}
+
+// Bilinear move of a size × size image by (dx, dy) pixels (x right, y down), zero outside.
+function shift(image, size, dx, dy) {
+  const out = new Float32Array(size * size);
+  const ix = Math.floor(dx), iy = Math.floor(dy), fx = dx - ix, fy = dy - iy;
+  const at = (r, c) => (r >= 0 && r < size && c >= 0 && c < size ? image[r * size + c] : 0);
+  for (let r = 0; r < size; r++) {
+    for (let c = 0; c < size; c++) {
+      const r0 = r - iy, c0 = c - ix;
+      out[r * size + c] = (1 - fy) * ((1 - fx) * at(r0, c0) + fx * at(r0, c0 - 1)) + fy * ((1 - fx) * at(r0 - 1, c0) + fx * at(r0 - 1, c0 - 1));
+    }
+  }
+  return out;
+}
+
+// Separable Gaussian blur of sigma px across (sx) and down (sy), edges replicated (as the fit's cv2.GaussianBlur).
+function blur(image, size, sx, sy) {
+  const weights = (sigma) => {
+    const reach = Math.max(1, Math.round(BLUR_REACH * sigma));
+    const w = [];
+    for (let i = -reach; i <= reach; i++) w.push(Math.exp(-0.5 * (i / sigma) ** 2));
+    const sum = w.reduce((a, b) => a + b, 0);
+    return { reach, w: w.map((v) => v / sum) };
+  };
+  const clamp = (i) => Math.min(size - 1, Math.max(0, i));
+  const pass = (source, horizontal, { reach, w }) => {
+    const out = new Float32Array(size * size);
+    for (let r = 0; r < size; r++) {
+      for (let c = 0; c < size; c++) {
+        let v = 0;
+        for (let k = -reach; k <= reach; k++) {
+          v += w[k + reach] * (horizontal ? source[r * size + clamp(c + k)] : source[clamp(r + k) * size + c]);
+        }
+        out[r * size + c] = v;
+      }
+    }
+    return out;
+  };
+  return pass(pass(image, true, weights(sx)), false, weights(sy));
+}
+
+// The tile's crop (uint16 between crop_range, base64) as linear values.
+function cropValues(tile) {
+  const bytes = Uint8Array.from(atob(tile.crop), (ch) => ch.charCodeAt(0));
+  const view = new DataView(bytes.buffer);
+  const [low, high] = tile.crop_range;
+  const out = new Float32Array(tile.size * tile.size);
+  for (let i = 0; i < out.length; i++) out[i] = low + (view.getUint16(2 * i, true) / 65535) * (high - low);
+  return out;
+}
+
+// Residual colours of the HTML report (report/html.py _RESIDUAL_STOPS): blue darker, white equal, red brighter.
+const RESIDUAL_STOPS = [[0, [33, 102, 172]], [0.5, [247, 247, 247]], [1, [178, 24, 43]]];
+
+function residualColour(value, span) {
+  const t = 0.5 + 0.5 * Math.max(-1, Math.min(1, value / Math.max(span, 1e-9)));
+  const [[p0, c0], [p1, c1]] = t <= 0.5 ? [RESIDUAL_STOPS[0], RESIDUAL_STOPS[1]] : [RESIDUAL_STOPS[1], RESIDUAL_STOPS[2]];
+  const f = (t - p0) / (p1 - p0);
+  return c0.map((c, i) => Math.round(c + f * (c1[i] - c)));
+}
+
+// As the report's tiles (_grey8): (v − background) / (plateau − background), clipped, through a gamma of 2.
+function grey(value, low, high) {
+  return Math.round(Math.sqrt(Math.max(0, Math.min(1, (value - low) / Math.max(high - low, 1e-9)))) * 255);
+}
+
+function paint(canvas, size, rgbAt) {
+  canvas.width = size;
+  canvas.height = size;
+  const context = canvas.getContext("2d");
+  const image = context.createImageData(size, size);
+  for (let i = 0; i < size * size; i++) {
+    const [r, g, b] = rgbAt(i);
+    image.data.set([r, g, b, 255], 4 * i);
+  }
+  context.putImageData(image, 0, 0);
+}
+
+const kernels = { renderer: null, failed: null, cache: new Map(), shown: null };
+
+async function kernelRenderer() {
+  if (kernels.renderer || kernels.failed) return kernels.renderer;
+  if (!kernels.starting) {
+    kernels.starting = KernelRenderer.create(state.info.kernel).then(
+      (renderer) => { kernels.renderer = renderer; return renderer; },
+      (error) => { kernels.failed = error.message; return null; });
+  }
+  return kernels.starting;
+}
+
 // --- what the page shows of a compare ------------------------------------------------------------
 
 const fmt = (value, digits) => (value === null || value === undefined ? "–" : Number(value).toFixed(digits));
@@ -363,9 +576,11 @@ function select(index) {
 function showMatch() {
   const box = $("match").querySelector(".tiles");
   box.replaceChildren();
+  kernels.shown = null;
   const disc = state.shown && state.shown.doc.discs.find((d) => d.index === state.selected);
   if (!disc) {
     $("match-text").textContent = "Click a disc in the table to see it beside the fitted model.";
+    document.body.dataset.kernel = "none";
     return;
   }
   const metrics = [`#${disc.index}`, `${role(disc)}`, `D ${fmt(disc.diameter_px, 2)} px`];
@@ -381,17 +596,83 @@ function showMatch() {
   }
   $("match-text").textContent = metrics.join(" · ");
   const tiles = state.shown.tiles.tiles[String(disc.index)];
-  if (!tiles) return;
-  for (const [key, label] of [["photo", "photo"], ["model", "fitted model"], ["residual", "residual"]]) {
-    const figure = document.createElement("figure");
+  $("match-note").textContent = "";
+  if (!tiles) {
+    document.body.dataset.kernel = "none";
+    return;
+  }
+  if (!tiles.kernel) {
+    pythonTiles(box, tiles, "this result has no kernel data");
+    return;
+  }
+  drawMatch(box, disc, tiles).catch((error) => pythonTiles(box, tiles, error.message));
+}
+
+function figure(element, label) {
+  const item = document.createElement("figure");
+  const caption = document.createElement("figcaption");
+  caption.textContent = label;
+  item.append(element, caption);
+  return item;
+}
+
+// Without WebGPU: the crop, the model and the residual as the HTML report draws them (in Python).
+function pythonTiles(box, tiles, why) {
+  box.replaceChildren();
+  for (const [key, label] of [["photo", "photo"], ["model", "fitted model (Python)"], ["residual", "residual"]]) {
     const img = document.createElement("img");
     img.src = tiles[key];
     img.alt = label;
-    const caption = document.createElement("figcaption");
-    caption.textContent = label;
-    figure.append(img, caption);
-    box.appendChild(figure);
+    box.appendChild(figure(img, label));
   }
+  $("match-note").textContent = `The kernel could not be drawn in this browser (${why}): the model is the one drawn in Python, `
+    + "as the HTML report draws it (photo − model: blue darker, red brighter).";
+  document.body.dataset.kernel = "fallback";
+}
+
+async function drawMatch(box, disc, tiles) {
+  const key = `${state.shown.job}:${disc.index}`;
+  kernels.shown = key;
+  document.body.dataset.kernel = "drawing";
+  const renderer = await kernelRenderer();
+  if (kernels.shown !== key) return;
+  if (!renderer) {
+    pythonTiles(box, tiles, kernels.failed);
+    return;
+  }
+  let drawn = kernels.cache.get(key);
+  if (!drawn) {
+    drawn = await renderer.draw(tiles.kernel);
+    kernels.cache.set(key, drawn);
+  }
+  if (kernels.shown !== key) return;
+  const tile = tiles.kernel;
+  const { size, background: low, plateau: high } = tile;
+  const crop = cropValues(tile);
+  const levels = (profile) => Float32Array.from(profile, (p) => low + (high - low) * p);
+  const models = drawn.channels.map(levels);
+  const model = models[models.length === 3 ? 1 : 0];  // the luminance model is green's (the reference size)
+  const residual = Float32Array.from(crop, (v, i) => v - model[i]);
+  const canvases = ["photo", "kernel", "residual"].map((name) => {
+    const canvas = document.createElement("canvas");
+    canvas.id = `match-${name}`;
+    return canvas;
+  });
+  paint(canvases[0], size, (i) => { const g = grey(crop[i], low, high); return [g, g, g]; });
+  paint(canvases[1], size, (i) => (models.length === 3 ? models.map((m) => grey(m[i], low, high)) : Array(3).fill(grey(model[i], low, high))));
+  paint(canvases[2], size, (i) => residualColour(residual[i], tile.residual_span));
+  box.replaceChildren(figure(canvases[0], "photo"), figure(canvases[1], "kernel (WebGPU)"), figure(canvases[2], "residual"));
+  let squares = 0;
+  for (const r of residual) squares += r * r;
+  const rms = Math.sqrt(squares / residual.length) / Math.max(high - low, 1e-9);
+  const reduced = tile.factor > 1 ? `, the crop reduced ${tile.factor}×` : "";
+  $("match-note").textContent = `The kernel of the fitted aperture at this disc (its size, angle and place in the frame, the `
+    + `fitted edge blur and levels${reduced}) drawn here by the project's kernel renderer (kernel_mc.wgsl, ${tile.samples} `
+    + `samples, ${drawn.ms.toFixed(0)} ms on ${renderer.adapterName}); residual photo − model (blue darker, red brighter), `
+    + `RMS ${(100 * rms).toFixed(1)} % of the disc's brightness.`;
+  window.photoView.kernel = { key, index: disc.index, size, kernel: Array.from(drawn.kernel), model: Array.from(model),
+    residual_rms: rms, samples: tile.samples, ms: drawn.ms };
+  document.body.dataset.kernel = "ready";
 }
 
 function changed() {
@@ -565,7 +846,15 @@ window.addEventListener("keydown", (event) => {
 });
 new ResizeObserver(resize).observe(canvas);
 
-window.photoView = { state, clientXY, refit, reset, undo };
+// drawTile: the kernel renderer on a tile of one's own (the tests draw apertures the photo has not).
+async function drawTile(tile) {
+  const renderer = await kernelRenderer();
+  if (!renderer) return { error: kernels.failed };
+  const drawn = await renderer.draw(tile);
+  return { kernels: drawn.kernels.map((k) => Array.from(k)), profiles: drawn.channels.map((c) => Array.from(c)) };
+}
+
+window.photoView = { state, clientXY, refit, reset, undo, drawTile };
 
 start().catch((error) => {
   document.body.dataset.state = "failed";
