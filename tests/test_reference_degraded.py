@@ -1,0 +1,45 @@
+"""Degraded copies of the reference photos (JPEG at quality 60, noise of σ 0.02): ``compare`` adds no
+lens feature that the original photo does not show, and keeps its answer (issue: features on real
+photos only where the discs show them, none made of JPEG or sensor noise).
+
+The copies and the reading of an answer are ``benchmarks/real_degraded.py``'s (one definition of
+each), which prints the full table over every photo and more kinds of copy.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+BENCHMARK = Path(__file__).resolve().parents[1] / "benchmarks" / "real_degraded.py"
+
+
+def _benchmark():
+    spec = importlib.util.spec_from_file_location("real_degraded", BENCHMARK)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.parametrize("variant", ["jpeg60", "noise"])
+@pytest.mark.parametrize("name", ["01_water-glints_canon6d_ef85.jpg", "04_juniper-droplet-rings_pablo-garcia-saldana.jpg",
+                                  "06_christmas-lights_nikon-d5300.jpg"])
+def test_a_degraded_copy_adds_no_lens_feature(compared, reference_photo, tmp_path, name, variant):
+    from bokehfit.compare import compare_photo
+
+    bench = _benchmark()
+    original = bench.reading(compared(name))
+    image = cv2.imread(str(reference_photo(name)), cv2.IMREAD_COLOR)
+    copy, suffix = bench.degrade(image, variant, np.random.default_rng(bench.SEED))
+    out = tmp_path / f"copy{suffix}"
+    assert cv2.imwrite(str(out), copy, [cv2.IMWRITE_JPEG_QUALITY, 60] if suffix == ".jpg" else [])
+    seen = bench.reading(compare_photo(out))
+    assert seen["answered"] == original["answered"] and seen["family"] == original["family"], (original, seen)
+    added = set(seen["features"]) - set(original["features"])
+    assert not added, f"{variant} made {sorted(added)} of a photo that shows none: {original} -> {seen}"
+    if name.startswith("04"):  # the soap-bubble rims the person reads are kept
+        assert "rim+" in seen["features"], seen
