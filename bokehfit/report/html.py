@@ -13,6 +13,7 @@ from __future__ import annotations
 import base64
 import html
 import math
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
@@ -63,7 +64,7 @@ def _data_uri(image: np.ndarray, kind: str = ".png") -> str:
     return f"data:{mime};base64,{base64.b64encode(data.tobytes()).decode('ascii')}" if ok else ""
 
 
-def _grey8(linear: np.ndarray, low: float, high: float, size: int) -> np.ndarray:
+def grey8(linear: np.ndarray, low: float, high: float, size: int) -> np.ndarray:
     scaled = np.clip((linear - low) / max(high - low, 1e-9), 0.0, 1.0)
     image = np.round(np.sqrt(scaled) * 255).astype(np.uint8)  # a gamma of 2 shows the edges
     return cv2.resize(image, (size, size), interpolation=cv2.INTER_NEAREST)
@@ -73,7 +74,7 @@ def _grey8(linear: np.ndarray, low: float, high: float, size: int) -> np.ndarray
 _RESIDUAL_STOPS = ((0.0, (33, 102, 172)), (0.5, (247, 247, 247)), (1.0, (178, 24, 43)))
 
 
-def _residual8(residual: np.ndarray, span: float, size: int) -> np.ndarray:
+def residual8(residual: np.ndarray, span: float, size: int) -> np.ndarray:
     """Residual as colour on :data:`_RESIDUAL_STOPS`, ±``span`` at the ends (BGR)."""
     t = 0.5 + 0.5 * np.clip(residual / max(span, 1e-9), -1.0, 1.0)
     positions = [p for p, _ in _RESIDUAL_STOPS]
@@ -96,14 +97,30 @@ def _residual_bar(span_fraction: float) -> str:
                        stops, [f"−{span_fraction:.0%} (darker)", "0", f"+{span_fraction:.0%} (brighter)"])
 
 
-def _disc_tiles(comparison: Comparison, entries: dict[int, dict]) -> str:
+@dataclass(frozen=True)
+class DiscWindow:
+    """A fitted disc's square window of the photo (``left``, ``top``: its top-left pixel), the fitted
+    model over it, and the levels the tiles are shown between (its background and plateau)."""
+
+    item: object  #: the fit's entry for the disc (``ApertureFit.disc_fits``)
+    fitted: object  #: the chosen family's fit of that disc
+    left: int
+    top: int
+    crop: np.ndarray
+    model: np.ndarray
+    low: float
+    high: float
+
+
+def disc_windows(comparison: Comparison, most: int) -> list[DiscWindow]:
+    """The windows of the first ``most`` fitted discs, each reaching 1.3 times the disc's outline (and
+    2 px) around its fitted centre; discs whose window the frame cuts are left out."""
     fit = comparison.fit
     luminance = comparison.photo.luminance
     height, width = luminance.shape
-    tiles = []
-    for item in fit.disc_fits[:MAX_DISC_TILES]:
+    windows = []
+    for item in fit.disc_fits[:most]:
         fitted = item.fits[fit.family.name]
-        entry = entries[item.disc.index]
         reach = float(np.max(np.hypot(*(item.disc.outline_xy - item.disc.center_xy).T)))
         half = int(math.ceil(1.3 * reach + 2))
         col, row = int(round(fitted.center_xy[0])), int(round(fitted.center_xy[1]))
@@ -112,7 +129,16 @@ def _disc_tiles(comparison: Comparison, entries: dict[int, dict]) -> str:
             continue
         crop = luminance[top : top + 2 * half + 1, left : left + 2 * half + 1]
         model = model_window(fitted, left, top, 2 * half + 1)
-        low, high = fitted.background, max(fitted.plateau, fitted.background + 1e-6)
+        windows.append(DiscWindow(item, fitted, left, top, crop, model, fitted.background,
+                                  max(fitted.plateau, fitted.background + 1e-6)))
+    return windows
+
+
+def _disc_tiles(comparison: Comparison, entries: dict[int, dict]) -> str:
+    tiles = []
+    for window in disc_windows(comparison, MAX_DISC_TILES):
+        entry = entries[window.item.disc.index]
+        crop, model, low, high = window.crop, window.model, window.low, window.high
         residual = crop - model
         # Every number in the caption is the JSON's (one disc, one diameter).
         caption = f"#{entry['index']}: fitted {entry['fit_diameter_px']:.2f} px"
@@ -123,9 +149,9 @@ def _disc_tiles(comparison: Comparison, entries: dict[int, dict]) -> str:
         images = "".join(
             f'<img src="{_data_uri(image)}" width="{DISC_TILE_PX}" height="{DISC_TILE_PX}" alt="{alt}" title="{alt}">'
             for image, alt in (
-                (_grey8(crop, low, high, DISC_TILE_PX), "photo"),
-                (_grey8(model, low, high, DISC_TILE_PX), "model"),
-                (_residual8(residual, RESIDUAL_SPAN * (high - low), DISC_TILE_PX), "residual"),
+                (grey8(crop, low, high, DISC_TILE_PX), "photo"),
+                (grey8(model, low, high, DISC_TILE_PX), "model"),
+                (residual8(residual, RESIDUAL_SPAN * (high - low), DISC_TILE_PX), "residual"),
             )
         )
         tiles.append(f'<div class="tile">{images}<br>{html.escape(caption)}</div>')

@@ -71,31 +71,17 @@ def _png_uri(image: np.ndarray) -> str:
 
 def _tiles(comparison) -> dict[str, dict]:
     """Per fitted disc: the photo's crop, the fitted model at that place and the residual (PNG data URIs)."""
-    from bokehfit.fit.pixels import model_window
-    from bokehfit.report.html import _grey8, _residual8
+    from bokehfit.report.html import disc_windows, grey8, residual8
 
-    fit = comparison.fit
-    if not fit:
+    if not comparison.fit:
         return {}
-    luminance = comparison.photo.luminance
-    height, width = luminance.shape
     tiles = {}
-    for item in fit.disc_fits[:MAX_TILES]:
-        fitted = item.fits[fit.family.name]
-        reach = float(np.max(np.hypot(*(item.disc.outline_xy - item.disc.center_xy).T)))
-        half = int(math.ceil(1.3 * reach + 2))
-        col, row = int(round(fitted.center_xy[0])), int(round(fitted.center_xy[1]))
-        left, top = col - half, row - half
-        if left < 0 or top < 0 or left + 2 * half + 1 > width or top + 2 * half + 1 > height:
-            continue
-        crop = luminance[top : top + 2 * half + 1, left : left + 2 * half + 1]
-        model = model_window(fitted, left, top, 2 * half + 1)
-        low, high = fitted.background, max(fitted.plateau, fitted.background + 1e-6)
-        tiles[str(item.disc.index)] = {
-            "photo": _png_uri(_grey8(crop, low, high, TILE_PX)),
-            "model": _png_uri(_grey8(model, low, high, TILE_PX)),
-            "residual": _png_uri(_residual8(crop - model, RESIDUAL_SPAN * (high - low), TILE_PX)),
-            "kernel": kernel_tile(fitted, crop, left, top),
+    for w in disc_windows(comparison, MAX_TILES):
+        tiles[str(w.item.disc.index)] = {
+            "photo": _png_uri(grey8(w.crop, w.low, w.high, TILE_PX)),
+            "model": _png_uri(grey8(w.model, w.low, w.high, TILE_PX)),
+            "residual": _png_uri(residual8(w.crop - w.model, RESIDUAL_SPAN * (w.high - w.low), TILE_PX)),
+            "kernel": kernel_tile(w.fitted, w.crop, w.left, w.top),
         }
     return tiles
 

@@ -473,7 +473,7 @@ function residualColour(value, span) {
   return c0.map((c, i) => Math.round(c + f * (c1[i] - c)));
 }
 
-// As the report's tiles (_grey8): (v − background) / (plateau − background), clipped, through a gamma of 2.
+// As the report's tiles (grey8): (v − background) / (plateau − background), clipped, through a gamma of 2.
 function grey(value, low, high) {
   return Math.round(Math.sqrt(Math.max(0, Math.min(1, (value - low) / Math.max(high - low, 1e-9)))) * 255);
 }
