@@ -6,7 +6,7 @@ space, by an HTML comment naming the constant it restates; the rendered page sho
     discs under 64<!-- bokehfit.compare.SMALL_DISC_PX --> px
     less than 50<!-- bokehfit.compare.FAINT_CONTRAST_REL:% --> % above their background
     at most 2,000<!-- bokehfit.discs.MAX_CANDIDATES:, --> candidates
-    bodies of 8<!-- bokehfit.view.server.MAX_BODY_BYTES:MiB --> MiB at most
+    bodies of 8<!-- bokehfit.view.bodies.MAX_BODY_BYTES:MiB --> MiB at most
 
 The comment holds a dotted name, a module of bokehfit then attributes and items: a constant
 (``bokehfit.compare.MIN_SURE_IOU``), a class attribute such as a dataclass field's default

@@ -138,7 +138,7 @@ def _compiled_sources() -> dict[str, str]:
     from bokehfit.scene import cornell_box
     from bokehfit.scene.renderer import pathtrace_source, points_source
     from bokehfit.scene.wgsl import scene_wgsl
-    from bokehfit.view.server import display_source
+    from bokehfit.view.wgsl import display_source
 
     return {
         "pathtrace.wgsl": pathtrace_source(scene_wgsl(cornell_box())),

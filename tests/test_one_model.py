@@ -338,7 +338,7 @@ HAND_WRITTEN_INTERFACE = (
 def _interfaces():
     from bokehfit.kernels.mc import KERNEL_INTERFACE
     from bokehfit.scene.renderer import PATHTRACE_INTERFACE, POINTS_INTERFACE
-    from bokehfit.view.server import DISPLAY_INTERFACE
+    from bokehfit.view.wgsl import DISPLAY_INTERFACE
 
     return {
         "kernel_mc.wgsl": KERNEL_INTERFACE,

@@ -72,7 +72,7 @@ def test_the_pages_display_pass_shows_what_a_png_of_the_render_holds(gpu):
 
     from bokehfit.gpu.compute import dispatch
     from bokehfit.scene.renderer import RENDER_PARAMS, set_tile
-    from bokehfit.view.server import DISPLAY_INTERFACE, display_source
+    from bokehfit.view.wgsl import DISPLAY_INTERFACE, display_source
 
     width, height, exposure_ev = 37, 23, 1.0
     rng = np.random.default_rng(5)

@@ -28,7 +28,7 @@ from bokehfit.apertures import SHAPES, MaskTable, make_aperture
 from bokehfit.apertures.mask import MAX_MASK_SIDE
 from bokehfit.errors import InputError
 from bokehfit.view import ViewerServer
-from bokehfit.view.server import MaskStore
+from bokehfit.view.masks import MaskStore
 
 #: Longest wait for one answer (s).
 ANSWER_TIMEOUT_S = 15.0
@@ -306,7 +306,7 @@ def test_brackets_inside_strings_are_not_nesting(server):
 
 
 def test_json_depth_counts_outside_strings_only():
-    from bokehfit.view.server import json_depth
+    from bokehfit.view.bodies import json_depth
 
     assert json_depth(b"1") == 0
     assert json_depth(b'{"a": [1, {"b": "[[[\\"]]"}], "c": {}}') == 3

@@ -37,7 +37,7 @@ import pytest
 
 from bokehfit.apertures import MaskTable
 from bokehfit.view import ViewerServer
-from bokehfit.view.server import MAX_BODY_BYTES, MAX_JSON_VALUES, json_shape
+from bokehfit.view.bodies import MAX_BODY_BYTES, MAX_JSON_VALUES, json_shape
 # server (a module-scoped viewer) and no_traceback (autouse) are the viewer tests' fixtures, shared.
 from test_view_server import (  # noqa: F401
     assert_refused, compare_json, exchange, no_traceback, page_token, parse_answer, png_bytes, request, server,
@@ -424,7 +424,7 @@ def test_escaped_quotes_are_scanned_in_linear_time():
 
     script = (
         "import json, sys, time\n"
-        "from bokehfit.view.server import parse_json_body\n"
+        "from bokehfit.view.bodies import parse_json_body\n"
         "from bokehfit.errors import InputError\n"
         "times = {}\n"
         "for name, body in json.loads(sys.stdin.read()).items():\n"

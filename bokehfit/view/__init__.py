@@ -8,17 +8,9 @@ the uniform layout and every uniform value, all computed by the Python
 renderer's code, so the browser and ``bokehfit render`` trace the same paths.
 """
 
-from bokehfit.view.server import (
-    COC_DIVISOR,
-    DepthOfField,
-    ViewerServer,
-    depth_of_field,
-    pathtrace_source,
-    settings_from_compare,
-    uniform_layout,
-    uniform_values,
-    viewer_config,
-)
+from bokehfit.view.server import ViewerServer
+from bokehfit.view.settings import COC_DIVISOR, DepthOfField, depth_of_field, settings_from_compare, viewer_config
+from bokehfit.view.wgsl import pathtrace_source, uniform_layout, uniform_values
 
 __all__ = [
     "COC_DIVISOR",
