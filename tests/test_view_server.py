@@ -317,7 +317,7 @@ def test_an_unexpected_failure_answers_500_in_one_line(server, monkeypatch, capf
     def broken(*args):
         raise RuntimeError("simulated fault")
 
-    monkeypatch.setattr("bokehfit.view.server.viewer_config", broken)
+    monkeypatch.setattr("bokehfit.view.handler.viewer_config", broken)
     assert_refused(exchange(server.port, request(server.port)), 500, "internal error")
     monkeypatch.undo()
     assert exchange(server.port, request(server.port)).status == 200
