@@ -4,7 +4,7 @@
 one result object that the JSON document (schema_version 2, design.md §7b), the
 text summary and the HTML report are all rendered from, on every outcome
 (``fitted``, ``unsure``, ``no_fit``, ``no_discs``), so one quantity has one
-number everywhere.
+number everywhere. The f-stop is :mod:`bokehfit.optics`'s.
 """
 
 from __future__ import annotations
@@ -32,33 +32,19 @@ from bokehfit.kernels import AUTO, Kernel, compute_kernel
 from bokehfit.kernels.exact import coverage
 from bokehfit.metrics import METRICS, angle_error, compare_outlines
 from bokehfit.metrics.outlines import resample
-from bokehfit.optics import (
-    LENS_MODELS,
-    SIZE_CONVENTIONS,
-    check_fitted_fstop,
-    circumscribed_fstop,
-    focus_problem,
-    fstop_from_coc,
-    light_distance_from_coc,
-    pixel_pitch_mm,
-)
+from bokehfit.optics import FAR_AS_INFINITY, FStop, Geometry, estimate_fstop, resolve_geometry
+from bokehfit.uncertainty import measurable, plus_minus, unmeasurable_reason
 
 __all__ = [
     "SCHEMA_VERSION",
-    "Geometry",
-    "FStop",
     "Comparison",
     "compare_photo",
     "disc_problems",
-    "estimate_fstop",
     "evidence_words",
     "distance_text",
-    "measurable",
-    "plus_minus",
     "table_candidates",
     "judge",
     "kernel_words",
-    "resolve_geometry",
 ]
 
 SCHEMA_VERSION = 2
@@ -67,9 +53,6 @@ SCHEMA_VERSION = 2
 EVIDENCE_WORDS = ((2.0, "barely any"), (6.0, "positive"), (10.0, "strong"), (math.inf, "very strong"))
 #: The verdict's first sentence aims at most this many characters (what the aperture is, how sure, why).
 HEADLINE_CHARS = 120
-#: A light this many focus distances away or farther makes a disc within 1 % of a light's at infinity
-#: (the disc grows as 1 − d_f/d, design.md §4): no photo tells them apart, so people read "≈ ∞".
-FAR_AS_INFINITY = 100.0
 #: L1 tolerance of the matched kernel: its 50 % outline is what the metrics use. It is
 #: drawn by the cheapest method that meets it, the start-up of a GPU included
 #: (``method="auto"``: ``exact`` for any usual disc, which starts no GPU), and a
@@ -92,56 +75,6 @@ FAINT_CONTRAST_REL = 0.5
 #: The kernel is drawn at the fitted angle, so each disc's best alignment with
 #: it is searched within this many degrees.
 ALIGNMENT_SEARCH_DEG = 10.0
-
-
-@dataclass(frozen=True)
-class Geometry:
-    """What the f-stop needs, with where each value came from."""
-
-    focal_length_mm: float | None
-    sensor_width_mm: float | None
-    focus_distance_m: float | None
-    light_distance_m: float
-    sources: dict[str, str]
-    frame: str | None = None  #: how the file's pixels relate to the sensor (downscaled, cropped)
-    pixel_pitch_mm: float | None = None  #: sensor width over the image's long side
-
-    def to_json(self) -> dict:
-        return {
-            "focal_length_mm": self.focal_length_mm,
-            "sensor_width_mm": self.sensor_width_mm,
-            "focus_distance_m": self.focus_distance_m,
-            "light_distance_m": None if math.isinf(self.light_distance_m) else self.light_distance_m,
-            "sources": self.sources,
-            "frame": self.frame,
-            "pixel_pitch_mm": None if self.pixel_pitch_mm is None else round(self.pixel_pitch_mm, 6),
-        }
-
-
-@dataclass(frozen=True)
-class FStop:
-    """The f-stop estimate (or the bound it implies), or None with the reason.
-
-    ``bound`` is None when ``value`` is the f-stop itself (the lights' distance is
-    known) and ``"upper"`` when it is the largest f-stop the discs allow (the lights'
-    distance is unknown: lights behind the focus plane at any finite distance give a
-    smaller f-stop than lights at infinity). ``exif_fnumber`` is EXIF's FNumber;
-    ``light_distances_m`` the distance of each disc's light that EXIF's FNumber implies
-    (by disc index; None where no light on that side of the focus plane makes so large
-    a disc); ``consistency`` says, when not None, that EXIF's FNumber, the focus
-    distance and the fitted size disagree with every light distance.
-    """
-
-    value: float | None
-    uncertainty: float | None
-    reason: str | None
-    convention: str
-    lens_model: str
-    bound: str | None = None
-    meaning: str | None = None
-    exif_fnumber: float | None = None
-    light_distances_m: dict[int, float | None] = field(default_factory=dict)
-    consistency: str | None = None
 
 
 @dataclass
@@ -439,43 +372,6 @@ def geometry_lines(data: dict) -> list[str]:
     return lines
 
 
-def _fmt(value, digits: int) -> str:
-    return "—" if value is None else f"{value:.{digits}f}"
-
-
-def measurable(value: float | None, uncertainty: float | None) -> bool:
-    """Whether a value is a measurement: its uncertainty (one standard deviation) does not exceed it."""
-    return value is None or uncertainty is None or (math.isfinite(uncertainty) and uncertainty <= abs(value))
-
-
-def unmeasurable_reason(shown: str, uncertainty: float, why: str) -> str:
-    """The reason a value is "not measurable", in words, with the numbers behind it."""
-    return f"not measurable: {shown} ± {_significant(uncertainty)}, an uncertainty larger than the value ({why})"
-
-
-def _significant(uncertainty: float) -> str:
-    return f"{uncertainty:.{_decimals(uncertainty)}f}"
-
-
-def _decimals(uncertainty: float | None, least: int = 2) -> int:
-    """Decimals for a value with this uncertainty: ``least``, more for an uncertainty under 0.01 (its first
-    significant digit shows), fewer for one of 1 and more (two significant digits)."""
-    if uncertainty is None or not uncertainty > 0 or not math.isfinite(uncertainty):
-        return least
-    if uncertainty >= 1.0:
-        return max(0, min(least, 1 - math.floor(math.log10(uncertainty))))
-    return max(least, min(6, -math.floor(math.log10(uncertainty))))
-
-
-def plus_minus(value: float, uncertainty: float | None, digits: int = 2, unit: str = "") -> str:
-    """``value ± uncertainty`` for people: the uncertainty to two significant digits and the value to match;
-    the value alone where there is no uncertainty (never "± 0.00")."""
-    if uncertainty is None or not uncertainty > 0:
-        return f"{value:.{digits}f}{unit}"
-    decimals = _decimals(uncertainty, digits)
-    return f"{value:.{decimals}f} ± {uncertainty:.{decimals}f}{unit}"
-
-
 def diameter_text(aperture: dict) -> str:
     """The disc diameter of the JSON's aperture for people, or why it is not measurable."""
     if aperture["diameter_px"] is None:
@@ -666,130 +562,6 @@ def kernel_words(data: dict) -> str:
     words = kernel["method"] if kernel["samples"] is None else f"{kernel['method']}, {kernel['samples']} samples"
     adapter = device.get("adapter")
     return f"{words} on {adapter}" if adapter else f"{words} on the CPU"
-
-
-def resolve_geometry(
-    photo: Photo,
-    *,
-    focal_length_mm: float | None = None,
-    sensor_width_mm: float | None = None,
-    focus_distance_m: float | None = None,
-    light_distance_m: float = math.inf,
-) -> Geometry:
-    """The geometry from the command line where given, else from EXIF."""
-    exif = photo.exif
-    sources = {}
-
-    def pick(name, given, from_exif, exif_source):
-        if given is not None:
-            sources[name] = "command line"
-            return float(given)
-        if from_exif is not None:
-            sources[name] = exif_source
-            return float(from_exif)
-        sources[name] = "unknown"
-        return None
-
-    known = exif.sources
-    focal = pick("focal_length_mm", focal_length_mm, exif.focal_length_mm, known.get("focal_length_mm", "EXIF FocalLength"))
-    sensor = pick("sensor_width_mm", sensor_width_mm, exif.sensor_width_mm, exif.sensor_width_source)
-    focus = pick("focus_distance_m", focus_distance_m, exif.focus_distance_m, known.get("focus_distance_m", "EXIF"))
-    sources["light_distance_m"] = "command line" if not math.isinf(light_distance_m) else "unknown (f-stop given as a bound)"
-    frame = exif.frame if sensor_width_mm is None else "sensor width from the command line: taken as the file's long side"
-    pitch = None if sensor is None else pixel_pitch_mm(sensor, photo.width, photo.height)
-    return Geometry(focal, sensor, focus, light_distance_m, sources, frame, pitch)
-
-
-def estimate_fstop(
-    fit: ApertureFit, photo: Photo, geometry: Geometry, lens_model: str, convention: str, focus_side: str | None = None
-) -> FStop:
-    """The aperture's f-stop from the fitted diameter, or the bound it implies, or None with the reason.
-
-    With the lights' distance known the value is the f-stop. Without it, ``value`` is
-    the f-stop for lights at infinity and ``bound`` is ``"upper"``: lights behind the
-    focus plane at a finite distance d make the same disc at the smaller f-stop
-    ``N_inf · (1 − d_f/d)``. Lights in front of the focus plane (``focus_side="near"``)
-    allow any f-stop up to ``f / c`` (a light at the lens). With EXIF's FNumber known,
-    each fitted disc's light distance follows from it (:func:`light_distance_from_coc`),
-    and where none can make the discs so large, ``consistency`` says so.
-    """
-    if lens_model not in LENS_MODELS:
-        raise InputError(f"lens model must be one of {', '.join(LENS_MODELS)} (got {lens_model!r})")
-    if convention not in SIZE_CONVENTIONS:
-        raise InputError(f"size convention must be one of {', '.join(SIZE_CONVENTIONS)} (got {convention!r})")
-    side = focus_side or getattr(fit, "focus_side", "unknown")
-    exif_n = photo.exif.fnumber
-    missing = [name for name in ("focal_length_mm", "sensor_width_mm", "focus_distance_m") if getattr(geometry, name) is None]
-    if missing:
-        flags = ", ".join("--" + name.replace("_", "-") for name in missing)
-        return FStop(None, None, f"unknown {', '.join(missing)} (give {flags})", convention, lens_model, exif_fnumber=exif_n)
-    f, focus = geometry.focal_length_mm, geometry.focus_distance_m
-    problem = focus_problem(f, focus)
-    if problem:
-        if "command line" in (geometry.sources.get("focus_distance_m"), geometry.sources.get("focal_length_mm")):
-            raise InputError(f"--focus-distance-m: {problem}")
-        return FStop(None, None, f"{problem} ({geometry.sources.get('focus_distance_m')}, "
-                     f"{geometry.sources.get('focal_length_mm')}): the metadata is ignored; give --focus-distance-m",
-                     convention, lens_model, exif_fnumber=exif_n)
-    pitch = pixel_pitch_mm(geometry.sensor_width_mm, photo.width, photo.height)
-    relative = fit.diameter_uncertainty_px / fit.diameter_px if fit.diameter_px else 0.0
-    coc = fit.diameter_px * pitch
-    bound = meaning = None
-    try:
-        if math.isinf(geometry.light_distance_m) and side == "near":
-            value = f / coc  # a light at the lens: the largest aperture number that makes the disc
-            bound, meaning = "upper", "lights in front of the focus plane at an unknown distance: any smaller f-stop fits"
-        else:
-            value = fstop_from_coc(coc, f, focus, geometry.light_distance_m, lens_model)
-            if math.isinf(geometry.light_distance_m):
-                bound = "upper"
-                meaning = ("the lights' distance is unknown: this is the f-stop for lights at infinity; lights behind the "
-                           "focus plane at any finite distance give a smaller f-stop (give --light-distance-m)")
-        check_fitted_fstop(value)  # an f-stop no lens has is not a result: the geometry behind it is wrong
-    except InputError as error:
-        return FStop(None, None, str(error), convention, lens_model, exif_fnumber=exif_n)
-    focus_range = photo.exif.focus_distance_range_m
-    if focus_range and geometry.sources.get("focus_distance_m") != "command line" and not (
-            math.isinf(geometry.light_distance_m) and side == "near"):
-        # A focus distance recorded as a range (Canon): its ends bracket the f-stop; half the spread
-        # joins the size's uncertainty (independent errors, added in quadrature).
-        try:
-            ends = [fstop_from_coc(coc, f, end, geometry.light_distance_m, lens_model) for end in focus_range]
-        except InputError:
-            ends = None
-        if ends:
-            relative = math.hypot(relative, abs(ends[1] - ends[0]) / (2.0 * value))
-            range_note = (f"the focus distance is a range, {focus_range[0]:g}–{focus_range[1]:g} m, which alone spans "
-                          f"f/{min(ends):.2f}–f/{max(ends):.2f} (in the uncertainty)")
-            meaning = range_note if meaning is None else f"{meaning}; {range_note}"
-    equal_area = value
-    if convention == "circumscribed":
-        value = circumscribed_fstop(value, fit.aperture)
-    distances: dict[int, float | None] = {}
-    consistency = None
-    if exif_n is not None:
-        wanted = "near" if side == "near" else "far"
-        for item in fit.disc_fits:
-            fitted = fit.disc_fit(item.disc)
-            if fitted is None or not fitted.diameter_px > 0:
-                continue
-            distances[item.disc.index] = light_distance_from_coc(fitted.diameter_px * pitch, exif_n, f, focus, wanted, lens_model)
-        if side != "near" and math.isinf(geometry.light_distance_m) and exif_n > equal_area * (1.0 + 2.0 * relative):
-            consistency = (
-                f"EXIF's f/{exif_n:g} cannot make discs of {fit.diameter_px:.1f} px at {f:g} mm focused at {focus:g} m "
-                f"from lights behind the focus plane at any distance (at most f/{equal_area:.2f}); lights in front of it, "
-                "wrong metadata (focus distance, sensor width), a crop, a teleconverter or a lens far from thin would explain it"
-            )
-        elif not math.isinf(geometry.light_distance_m) and abs(exif_n - equal_area) > 2.0 * equal_area * relative + 0.15 * exif_n:
-            consistency = (
-                f"EXIF's f/{exif_n:g} and the fitted f/{equal_area:.2f} for lights at {geometry.light_distance_m:g} m disagree: "
-                "check the light distance, the focus distance and the sensor width (a crop, a teleconverter or a lens far "
-                "from thin would also explain it)"
-            )
-    if not measurable(value, value * relative):
-        return FStop(None, None, unmeasurable_reason(f"f/{value:.2f}", value * relative, "the discs' sizes disagree"),
-                     convention, lens_model, exif_fnumber=exif_n, light_distances_m=distances)
-    return FStop(value, value * relative, None, convention, lens_model, bound, meaning, exif_n, distances, consistency)
 
 
 def _kernel_outline(kernel: Kernel) -> np.ndarray:

@@ -18,9 +18,9 @@ import numpy as np
 import pytest
 from photo_factory import write_jpeg
 
-from bokehfit.compare import FStop, Geometry, compare_photo, estimate_fstop, resolve_geometry
+from bokehfit.compare import compare_photo
 from bokehfit.io import load_photo
-from bokehfit.optics import coc_mm
+from bokehfit.optics import FStop, Geometry, coc_mm, estimate_fstop, resolve_geometry
 
 #: lensfun's crop factors have three or four digits: widths agree with the makers' to this (mm).
 LENSFUN_WIDTH_TOL_MM = 0.15

@@ -17,7 +17,8 @@ import re
 import pytest
 from test_survey import API_OPTIONS, write_render
 
-from bokehfit.compare import estimate_fstop, judge
+from bokehfit.compare import judge
+from bokehfit.optics import estimate_fstop
 from bokehfit.report.html import build_html
 
 #: The verdict's first sentence, at most (characters).

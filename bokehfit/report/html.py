@@ -18,8 +18,9 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from bokehfit.compare import (Comparison, diameter_text, distance_text, evidence_words, fstop_text, kernel_words, plus_minus,
+from bokehfit.compare import (Comparison, diameter_text, distance_text, evidence_words, fstop_text, kernel_words,
                               table_candidates)
+from bokehfit.uncertainty import plus_minus
 from bokehfit.fit.pixels import model_window
 from bokehfit.metrics import METRICS
 from bokehfit.report.overlay import ROLE_BGR, disc_role, draw_disc_overlay

@@ -469,8 +469,8 @@ class _Fit:
     ((50, 1), (2, 1), 2.0 * (1 + 1e-12), "outside the range of real lenses"),
 ])
 def test_absurd_geometry_gives_no_fstop_but_the_reason(tmp_path, focal, focus_m, light_m, words):
-    from bokehfit.compare import estimate_fstop, resolve_geometry
     from bokehfit.io import load_photo
+    from bokehfit.optics import estimate_fstop, resolve_geometry
 
     path = write_jpeg(tmp_path / "m.jpg", _disc_rgb(), exif=exif_for(make="Canon", model="Canon EOS 50D",
                                                                     fnumber=(28, 10), focal=focal, subject_distance=focus_m))
