@@ -66,8 +66,8 @@ def why_missed(comparison, score: DiscScore) -> Counter:
     """Why each labelled usable disc was not found usable: found but not usable (the disc's problems),
     found at its place with another size, a candidate measured and rejected there (the reason), or
     no candidate at all."""
-    from bokehfit.compare import disc_problems
     from bokehfit.discs.labels import at_place, matches
+    from bokehfit.words import disc_problems
 
     reasons = Counter()
     for label in score.missed:

@@ -4,7 +4,8 @@
 one result object that the JSON document (schema_version 2, design.md §7b), the
 text summary and the HTML report are all rendered from, on every outcome
 (``fitted``, ``unsure``, ``no_fit``, ``no_discs``), so one quantity has one
-number everywhere. The f-stop is :mod:`bokehfit.optics`'s.
+number everywhere. The f-stop is :mod:`bokehfit.optics`'s, the words a person reads
+:mod:`bokehfit.words`'s.
 """
 
 from __future__ import annotations
@@ -19,8 +20,7 @@ import numpy as np
 from skimage import measure
 
 from bokehfit import __version__
-from bokehfit.apertures import Aperture
-from bokehfit.discs import COMPARE_MIN_DIAMETER_PX, MIN_FIT_SEEN, Disc, DiscSearch, find_discs, measure_discs_at
+from bokehfit.discs import COMPARE_MIN_DIAMETER_PX, Disc, DiscSearch, find_discs, measure_discs_at
 from bokehfit.discs.labels import DiscLabels, read_labels
 from bokehfit.discs.measure import RESOLVABLE_PX
 from bokehfit.errors import InputError
@@ -32,27 +32,20 @@ from bokehfit.kernels import AUTO, Kernel, compute_kernel
 from bokehfit.kernels.exact import coverage
 from bokehfit.metrics import METRICS, angle_error, compare_outlines
 from bokehfit.metrics.outlines import resample
-from bokehfit.optics import FAR_AS_INFINITY, FStop, Geometry, estimate_fstop, resolve_geometry
-from bokehfit.uncertainty import measurable, plus_minus, unmeasurable_reason
+from bokehfit.optics import FStop, Geometry, estimate_fstop, resolve_geometry
+from bokehfit.uncertainty import measurable, unmeasurable_reason
+from bokehfit.words import (angle_note, article, clip_headline, describe, diameter_text, disc_problems, distance_text,
+                            evidence_words, fstop_text, geometry_lines, kernel_words, shape_words, table_candidates,
+                            used_as)
 
 __all__ = [
     "SCHEMA_VERSION",
     "Comparison",
     "compare_photo",
-    "disc_problems",
-    "evidence_words",
-    "distance_text",
-    "table_candidates",
     "judge",
-    "kernel_words",
 ]
 
 SCHEMA_VERSION = 2
-#: Evidence in words for a BIC margin (Kass & Raftery 1995, "Bayes factors",
-#: J. Am. Stat. Assoc. 90:773, section 3.2, on the scale 2·ln B ≈ ΔBIC).
-EVIDENCE_WORDS = ((2.0, "barely any"), (6.0, "positive"), (10.0, "strong"), (math.inf, "very strong"))
-#: The verdict's first sentence aims at most this many characters (what the aperture is, how sure, why).
-HEADLINE_CHARS = 120
 #: L1 tolerance of the matched kernel: its 50 % outline is what the metrics use. It is
 #: drawn by the cheapest method that meets it, the start-up of a GPU included
 #: (``method="auto"``: ``exact`` for any usual disc, which starts no GPU), and a
@@ -143,21 +136,21 @@ class Comparison:
         """
         status = self.status
         if status == "no_discs":
-            return _clip(f"No usable disc: {self.reason}.")
+            return clip_headline(f"No usable disc: {self.reason}.")
         if status == "no_fit":
             iou = self.metrics.get("iou")
             match = "" if iou is None else f" (overlap {iou:.2f}, {MIN_ACCEPTABLE_IOU} needed)"
-            return _clip(f"No fit: no aperture shape explains these discs; the best tried was {_article(self.fit.family.aperture.display_name)}"
+            return clip_headline(f"No fit: no aperture shape explains these discs; the best tried was {article(self.fit.family.aperture.display_name)}"
                          f"{match}.")
         fit = self.fit
         aperture = self.aperture_json()
-        what = _shape_words(aperture)
+        what = shape_words(aperture)
         count = len(fit.disc_fits)
         if status == "fitted":
             runner_up = self._runner_up()
             why = "only one shape was tried" if runner_up is None else "no other shape comes close"
-            return _clip(f"Sure: {what}, from {count} discs that agree; {why}.")
-        return _clip(f"Unsure: probably {_article(what)}, but {self.short_doubts[0] if self.short_doubts else 'see the doubts'}.")
+            return clip_headline(f"Sure: {what}, from {count} discs that agree; {why}.")
+        return clip_headline(f"Unsure: probably {article(what)}, but {self.short_doubts[0] if self.short_doubts else 'see the doubts'}.")
 
     @property
     def verdict_details(self) -> str:
@@ -169,7 +162,7 @@ class Comparison:
             return f"{self.rejection}."
         fit = self.fit
         aperture = self.aperture_json()
-        what = _describe(aperture)
+        what = describe(aperture)
         margin = fit.margin_bic
         runner_up = self._runner_up()
         count = len(fit.disc_fits)
@@ -177,11 +170,11 @@ class Comparison:
         if margin is None or runner_up is None:
             evidence = "only one shape was tried"
         elif margin < 0:  # set aside by the consensus or the outlines, whatever the pixels say (the notes say why)
-            evidence = f"the pixels alone favour {_article(runner_up['display_name'])} (ΔBIC {-margin:.0f})"
+            evidence = f"the pixels alone favour {article(runner_up['display_name'])} (ΔBIC {-margin:.0f})"
         elif status == "fitted":
-            evidence = f"{evidence_words(margin)} evidence over {_article(runner_up['display_name'])} (ΔBIC {margin:.0f})"
+            evidence = f"{evidence_words(margin)} evidence over {article(runner_up['display_name'])} (ΔBIC {margin:.0f})"
         else:
-            evidence = f"ΔBIC {margin:.0f} over {_article(runner_up['display_name'])}"
+            evidence = f"ΔBIC {margin:.0f} over {article(runner_up['display_name'])}"
         details = f"{what}; {discs}; {evidence}"
         if status == "unsure":
             details += "; unsure because " + " and ".join(self.doubts)
@@ -239,7 +232,7 @@ class Comparison:
                         runners_up=[], diameter_reason=None)
             return data
         data = fit.to_json()
-        data.update(fstop, angle_note=_angle_note(fit), sure=not self.doubts, doubts=self.doubts)
+        data.update(fstop, angle_note=angle_note(fit), sure=not self.doubts, doubts=self.doubts)
         data["diameter_reason"] = None
         if not measurable(data["diameter_px"], data["diameter_uncertainty_px"]):
             data["diameter_reason"] = unmeasurable_reason(f"{data['diameter_px']:.2f} px", data["diameter_uncertainty_px"],
@@ -255,7 +248,7 @@ class Comparison:
         entry = disc.to_json()
         entry["usable"] = bool(disc.usable)
         entry["used"] = fitted is not None
-        entry["used_as"] = None if fitted is None else _used_as(disc, fitted)
+        entry["used_as"] = None if fitted is None else used_as(disc, fitted)
         entry["rejected_because"] = disc_problems(disc)
         if disc.index in self.fit.rejected:
             entry["rejected_because"].append(self.fit.rejected[disc.index])
@@ -306,7 +299,7 @@ class Comparison:
             if aperture["exif_fnumber"] is not None:
                 lines.append(f"EXIF: f/{aperture['exif_fnumber']:g} (no f-stop fitted: {aperture['fstop_reason']})")
             return "\n".join(lines)
-        lines.append(f"aperture: {_describe(aperture)}, disc {diameter_text(aperture)}")
+        lines.append(f"aperture: {describe(aperture)}, disc {diameter_text(aperture)}")
         lines.append("f-stop: " + fstop_text(aperture))
         lines.extend(self.fstop_lines(data))
         if aperture["angle_note"]:
@@ -341,53 +334,6 @@ class Comparison:
         return lines
 
 
-def fstop_text(aperture: dict) -> str:
-    """The f-stop for people from the JSON's aperture: a value, a bound (said as one), or why it is unknown."""
-    if aperture["fstop"] is None:
-        return f"unknown: {aperture['fstop_reason']}"
-    value = "f/" + plus_minus(aperture["fstop"], aperture["fstop_uncertainty"])
-    how = f"{aperture['size_convention']}, {aperture['lens_model']} lens"
-    if aperture.get("fstop_bound") == "upper":
-        return f"at most {value} ({how}; {aperture['fstop_meaning']})"
-    return f"{value} ({how})"
-
-
-def geometry_lines(data: dict) -> list[str]:
-    """The geometry behind the f-stop, each value with its source, from the JSON."""
-    geometry = data["geometry"]
-    sources = geometry["sources"]
-    parts = []
-    for key, label, unit in (("focal_length_mm", "focal length", "mm"), ("sensor_width_mm", "sensor width", "mm"),
-                             ("focus_distance_m", "focus distance", "m"), ("light_distance_m", "lights' distance", "m")):
-        value = geometry[key]
-        shown = "unknown" if value is None else f"{value:g} {unit}"
-        if key == "light_distance_m" and value is None:
-            shown = "unknown"
-        parts.append(f"{label} {shown} [{sources.get(key, 'unknown')}]")
-    lines = ["geometry: " + "; ".join(parts)]
-    if geometry.get("frame"):
-        lines.append(f"frame: {geometry['frame']}")
-    for ignored in data["input"]["exif"].get("ignored", []):
-        lines.append(f"EXIF value ignored: {ignored}")
-    return lines
-
-
-def diameter_text(aperture: dict) -> str:
-    """The disc diameter of the JSON's aperture for people, or why it is not measurable."""
-    if aperture["diameter_px"] is None:
-        return aperture.get("diameter_reason") or "unknown"
-    return plus_minus(aperture["diameter_px"], aperture["diameter_uncertainty_px"], unit=" px")
-
-
-def distance_text(distance_m: float | None, focus_distance_m: float | None = None) -> str:
-    """A light's distance for people: "≈ ∞" at :data:`FAR_AS_INFINITY` focus distances or farther."""
-    if distance_m is None:
-        return "—"
-    if not math.isfinite(distance_m) or (focus_distance_m and distance_m >= FAR_AS_INFINITY * focus_distance_m):
-        return "≈ ∞"
-    return f"{distance_m:.3g} m"
-
-
 def _small_and_faint(fit: ApertureFit) -> tuple[float, float] | None:
     """The fitted discs' median diameter and median contrast over their background (a share of it), where
     both are under SMALL_DISC_PX and FAINT_CONTRAST_REL; else None."""
@@ -403,7 +349,7 @@ def short_doubts(fit: ApertureFit, metrics: dict[str, float | None]) -> list[str
     """The doubts of :func:`judge` in a few words each, most telling first (for the verdict's first sentence)."""
     words = []
     if fit.close_runner_up:
-        words.append(f"{_article(fit.runner_up.family.aperture.display_name)} fits almost as well")
+        words.append(f"{article(fit.runner_up.family.aperture.display_name)} fits almost as well")
     fitted = len(fit.disc_fits)
     if fitted < MIN_SURE_DISCS:
         words.append(f"only {fitted} disc{' is' if fitted == 1 else 's are'} clean enough")
@@ -433,135 +379,8 @@ def _with_roles(fit: ApertureFit, candidates: list[dict]) -> tuple[list[dict], d
     return entries, next((c for c in entries if c["role"] == "runner_up"), None)
 
 
-def table_candidates(aperture: dict) -> list[dict]:
-    """The JSON's candidates as the runners-up tables list them: the chosen model, the runner-up the
-    verdict names, then the rest by ΔBIC (``aperture.runners_up`` names them in this order)."""
-    candidates = aperture["candidates"]
-    if not candidates:
-        return []
-    first = [c for c in candidates if c.get("role") == "runner_up"]
-    rest = sorted((c for c in candidates[1:] if c.get("role") != "runner_up"), key=lambda c: c["delta_bic"])
-    return [candidates[0], *first, *rest]
-
-
-def _clip(sentence: str) -> str:
-    """A headline kept near :data:`HEADLINE_CHARS`: cut at a clause boundary before it when longer."""
-    if len(sentence) <= HEADLINE_CHARS:
-        return sentence
-    for mark in (" (", "; ", ": ", ", "):
-        cuts = [i for i in range(len(sentence)) if sentence.startswith(mark, i) and i < HEADLINE_CHARS - 1
-                and sentence.count("(", 0, i) == sentence.count(")", 0, i) and i > len(sentence.split(":")[0]) + 2]
-        if cuts:
-            return sentence[:max(cuts)].rstrip(" ,;:") + "."
-    return sentence[: HEADLINE_CHARS - 1].rstrip() + "…"
-
-
-def _shape_words(aperture: dict) -> str:
-    """The aperture's shape and angle for the verdict's first sentence (its features come after, with numbers)."""
-    name = Aperture.from_json(aperture).display_name
-    if aperture["angle_deg"] is not None:
-        name += f" at {aperture['angle_deg']:.2f}°"
-    return name
-
-
-def _article(words: str) -> str:
-    """'a circle', 'an 8-blade polygon'."""
-    vowel = words[:1].lower() in "aeiou" or words.split("-")[0] in ("8", "11", "18")
-    return ("an " if vowel else "a ") + words
-
-
-def _describe(aperture: dict) -> str:
-    """'hexagon at 15.02° ± 0.05°' from the JSON's aperture (its numbers, rounded for people).
-
-    A feature whose uncertainty exceeds its departure from the plain aperture is not shown: the
-    discs do not support it.
-    """
-    name = Aperture.from_json(aperture).display_name
-    if aperture["aspect"] is not None:
-        name += f" (aspect {aperture['aspect']:.2f})"
-    if aperture["angle_deg"] is not None:
-        name += " at " + plus_minus(aperture["angle_deg"], aperture["angle_uncertainty_deg"], unit="°")
-
-    def supported(key, neutral=0.0, part=None):
-        value, sigma = aperture.get(key), aperture.get(f"{key}_uncertainty")
-        if part is not None:
-            value = None if value is None else value.get(part)
-            sigma = None if sigma is None else sigma.get(part)
-        return value is not None and value != neutral and measurable(value - neutral, sigma)
-
-    features = []
-    if supported("roundness"):
-        features.append("roundness " + plus_minus(aperture["roundness"], aperture.get("roundness_uncertainty")))
-    if supported("squeeze", 1.0):
-        tall = "taller than wide" if aperture["squeeze"] > 1 else "wider than tall"
-        features.append(f"anamorphic squeeze {plus_minus(aperture['squeeze'], aperture.get('squeeze_uncertainty'), 3)} "
-                        f"(discs {tall})")
-    if supported("rim"):
-        side = "bright rim" if aperture["rim"] > 0 else "bright centre"
-        features.append(f"rim {plus_minus(aperture['rim'], aperture.get('rim_uncertainty'))} ({side})")
-    if aperture.get("vignetting"):
-        cut = aperture["vignetting"]
-        features.append(f"cat-eye vignetting (barrel radius {cut['radius']:.2f}, shift {cut['shift']:+.2f})")
-    if aperture.get("chromatic") and (supported("chromatic", part="red") or supported("chromatic", part="blue")):
-        colour = aperture["chromatic"]
-        features.append(f"chromatic (red disc {100 * colour['red']:+.1f} %, blue {100 * colour['blue']:+.1f} % of green's)")
-    return name + "".join(f", {feature}" for feature in features)
-
-
-def evidence_words(delta_bic: float) -> str:
-    """How strongly a BIC margin favours the winner, in words (Kass & Raftery 1995)."""
-    return next(words for limit, words in EVIDENCE_WORDS if delta_bic < limit)
-
-
-def disc_problems(disc: Disc) -> list[str]:
-    """Why a disc is not usable, in words shared by ``discs`` and ``compare`` (empty when usable)."""
-    if disc.usable:
-        return []
-    problems = ["cut by the frame"] if disc.clipped else []
-    if not disc.resolvable:
-        problems.append(f"under {RESOLVABLE_PX:g} px")
-    if disc.outline_seen < MIN_FIT_SEEN:
-        problems.append(f"only {disc.outline_seen:.0%} of its outline is its own")
-    return problems
-
-
-def _used_as(disc: Disc, fitted) -> str:
-    """What a used disc gave the fit, in words."""
-    if disc.evidence == "plateau" and not fitted.censored:
-        return "plateau and outline"
-    if fitted.censored:
-        return f"outline (saturated: {fitted.censored} clipped pixels fitted as lower bounds)"
-    if disc.ring or disc.bright_centre:
-        return f"outline and profile ({'a ring: bright rim' if disc.ring else 'bright centre'})"
-    if disc.evidence == "partial" or disc.overlaps:
-        left_out = "the occluder" if disc.occluded else "the other light"
-        return f"its own part ({disc.outline_seen:.0%} of the outline; {left_out} left out)"
-    return "outline"
-
-
 def _round(value):
     return None if value is None or not math.isfinite(value) else round(float(value), 5)
-
-
-def _angle_note(fit: ApertureFit) -> str | None:
-    aperture = fit.aperture
-    if not aperture.odd_symmetry or fit.focus_side != "unknown":
-        return None
-    other = aperture.near().canonical_angle_deg
-    return (
-        f"odd symmetry: lights behind the focus plane give {aperture.canonical_angle_deg:.2f}°, "
-        f"lights in front of it {other:.2f}° (pass --focus-side to choose)"
-    )
-
-
-def kernel_words(data: dict) -> str:
-    """How the matched kernel of a ``compare`` JSON document was drawn, in words (method, samples, device)."""
-    kernel, device = data["kernel"], data["device"]
-    if kernel is None:
-        return "none drawn"
-    words = kernel["method"] if kernel["samples"] is None else f"{kernel['method']}, {kernel['samples']} samples"
-    adapter = device.get("adapter")
-    return f"{words} on {adapter}" if adapter else f"{words} on the CPU"
 
 
 def _kernel_outline(kernel: Kernel) -> np.ndarray:

@@ -16,10 +16,10 @@ import pytest
 from test_cli_compare import PHOTO, bokehfit_cli, strict_json, write_jpeg, written
 
 from bokehfit.apertures import make_aperture
-from bokehfit.compare import diameter_text
 from bokehfit.discs import find_discs
 from bokehfit.report.overlay import ROLE_BGR, draw_disc_overlay
 from bokehfit.synthetic import SyntheticDisc, render_discs
+from bokehfit.words import diameter_text
 
 
 @pytest.fixture(scope="module")

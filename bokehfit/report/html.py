@@ -18,9 +18,9 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from bokehfit.compare import (Comparison, diameter_text, distance_text, evidence_words, fstop_text, kernel_words,
-                              table_candidates)
+from bokehfit.compare import Comparison
 from bokehfit.uncertainty import plus_minus
+from bokehfit.words import diameter_text, distance_text, evidence_words, fstop_text, kernel_words, table_candidates
 from bokehfit.fit.pixels import model_window
 from bokehfit.metrics import METRICS
 from bokehfit.report.overlay import ROLE_BGR, disc_role, draw_disc_overlay
