@@ -39,7 +39,6 @@ import dataclasses
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 
 import cv2
 import numpy as np
@@ -47,10 +46,20 @@ import numpy as np
 from bokehfit.apertures import Aperture
 from bokehfit.discs import MIN_FIT_SEEN, USABLE_EVIDENCE, Disc
 from bokehfit.errors import InputError
+from bokehfit.fit.chromatic import measure_chromatic
 from bokehfit.fit.families import FAMILIES, Family, families_for
 from bokehfit.fit.pixels import FIT_BOUNDS, DiscCrop, PixelFit, crop_disc, field_position, fit_discs, render_disc_model
-from bokehfit.fit.result import FailedFit, FitFailedError, FitOptions, Parameter
-from bokehfit.fit.chromatic import ChromaticMeasure, measure_chromatic
+from bokehfit.fit.result import (
+    LENS_FEATURES,
+    ROUND_ENOUGH,
+    ApertureFit,
+    CandidateModel,
+    DiscFit,
+    FailedFit,
+    FitFailedError,
+    FitOptions,
+    Parameter,
+)
 from bokehfit.fit.signature import Ellipse, Screen, fit_ellipse, outline_misfit, screen
 from bokehfit.metrics import angle_error
 
@@ -66,210 +75,12 @@ __all__ = [
     "FOCUS_SIDES",
     "LENS_FEATURES",
     "REGULAR_OUTLINE_MISFIT",
+    "ROUND_ENOUGH",
 ]
 
 FOCUS_SIDES = ("far", "near", "unknown")
 
 
-@dataclass(frozen=True)
-class DiscFit:
-    """One disc: its screen and its pixel fits, by family name.
-
-    The winner's entry is the disc in the joint fit (the shared aperture);
-    ``own`` is the winner fitted to this disc alone (its own angle, for the
-    spread between discs), and ``turned`` whether it shows the aperture turned by 180°.
-    """
-
-    disc: Disc
-    screens: list[Screen]
-    fits: dict[str, PixelFit]
-    own: PixelFit | None = None
-    turned: bool = False
-
-
-@dataclass(frozen=True)
-class CandidateModel:
-    """One family's result over all the fitted discs."""
-
-    family: Family
-    bic: float
-    delta_bic: float  #: above the best family's BIC (0 for the best)
-    angle_deg: float | None
-    angle_uncertainty_deg: float | None
-    diameter_px: float
-    screen_rms: float  #: median outline misfit over the discs, in equal-area radii
-    roundness: float | None = None  #: median fitted roundness over the discs (families that fit it)
-
-    def same_answer(self, other: CandidateModel) -> bool:
-        """Whether ``other`` says what this model says: the same shape straight or rounded, or, beside
-        the circle, blades so rounded that they are round too (roundness ≥ ROUND_ENOUGH)."""
-        if other.family.base == self.family.base:
-            return True
-        rounds = [m for m in (self, other) if m.roundness is not None]
-        circles = [m for m in (self, other) if m.family.aperture.is_circle]
-        return len(rounds) == 1 and len(circles) == 1 and rounds[0].roundness >= ROUND_ENOUGH
-
-    def to_json(self) -> dict:
-        return {
-            "shape": self.family.aperture.shape,
-            "blades": self.family.aperture.blades,
-            "name": self.family.name,
-            "display_name": self.family.aperture.display_name,
-            "angle_deg": None if self.angle_deg is None else round(self.angle_deg, 3),
-            "score": round(-self.delta_bic, 2) + 0.0,
-            "delta_bic": round(self.delta_bic, 2),
-            "bic": round(self.bic, 2),
-            "screen_rms": round(self.screen_rms, 5),
-            "diameter_px": round(self.diameter_px, 3),
-        }
-
-
-@dataclass(frozen=True)
-class ApertureFit:
-    """The fitted aperture, with the evidence (lmfit ``ModelResult``-like).
-
-    ``aperture`` is the aperture itself (for ``focus_side="near"`` turned by
-    180° from what the discs show); ``seen_angle_deg`` is the angle the discs
-    show, the one a kernel must be drawn at to match them. ``candidates`` are
-    the models tried, best first; the first is the winner with the consensus
-    angle and size over every fitted disc. :attr:`parameters` names each fitted
-    quantity with its uncertainty. A fit that found nothing to fit is a
-    :class:`FailedFit` instead.
-    """
-
-    message: str
-    aperture: Aperture
-    seen_angle_deg: float | None
-    angle_uncertainty_deg: float | None
-    diameter_px: float
-    diameter_uncertainty_px: float
-    blur_px: float
-    focus_side: str
-    candidates: list[CandidateModel]
-    disc_fits: list[DiscFit]
-    sure: bool
-    #: The runner-up fits about as well (a BIC margin under FitOptions.sure_delta_bic_per_disc per disc),
-    #: and was not set aside by a note.
-    close_runner_up: bool = False
-    options: FitOptions = FitOptions()
-    time_s: float = 0.0
-    #: The aperture as the discs show it (``aperture`` turned back for near discs: 180°, −rim, ...).
-    seen_aperture: Aperture | None = None
-    #: Discs set aside, index → reason: outlines no aperture shape explains, and discs fitted and then
-    #: left out because the others' consensus does not share them.
-    rejected: dict = dataclasses.field(default_factory=dict)
-    #: Each §3b feature tried on the joint fit → the BIC it gained (added when ≥ FEATURE_DELTA_BIC).
-    feature_tests: dict = dataclasses.field(default_factory=dict)
-    #: One standard deviation of each shared aperture parameter of the joint fit, by name.
-    feature_uncertainty: dict = dataclasses.field(default_factory=dict)
-    notes: tuple = ()  #: models set aside and why (an elongation the discs do not share)
-    #: What the discs' colours said (None where fewer than three could be measured, or no colour given).
-    chromatic_measure: ChromaticMeasure | None = None
-    #: Seconds by step of the fit (perf_counter): ``choose`` (the discs that show a shape), ``screen``
-    #: (crops and outline screens), ``family <name>`` (each candidate's pixel fit on the model discs),
-    #: ``winner`` (the winner on the other discs), ``joint``, ``features`` (the §3b feature trials),
-    #: ``plain`` (the simplest model against the winner), ``refit`` (discs beyond the joint fit),
-    #: ``chromatic``; ``time_s`` is their sum with the bookkeeping between them.
-    timing_s: dict = dataclasses.field(default_factory=dict)
-    success = True
-
-    def __bool__(self) -> bool:
-        return True
-
-    @property
-    def family(self) -> Family:
-        return self.candidates[0].family
-
-    @property
-    def outline_misfit(self) -> float:
-        """Median over the used discs of their outlines' misfit to the winning shape (equal-area radii):
-        about 0.01–0.05 for discs that show an aperture, 0.1 and more for blobs that show none."""
-        return self.candidates[0].screen_rms if self.candidates else math.nan
-
-    @property
-    def runner_up(self) -> CandidateModel | None:
-        """The best model that gives another answer (:meth:`CandidateModel.same_answer`); None if none."""
-        return next((m for m in self.candidates[1:] if not self.candidates[0].same_answer(m)), None)
-
-    @property
-    def margin_bic(self) -> float | None:
-        """The runner-up's BIC above the winner's (None when no other shape was tried)."""
-        runner_up = self.runner_up
-        return None if runner_up is None else runner_up.bic - self.candidates[0].bic
-
-    @property
-    def parameters(self) -> dict[str, Parameter]:
-        """The fitted quantities by JSON name, each with its uncertainty.
-
-        A §3b feature that was fitted has its value; one that was tested and
-        not needed its neutral value (roundness 0 for a straight n-gon, rim 0,
-        no vignetting); one that was not estimated None.
-        """
-        aperture = self.aperture
-        angle = aperture.canonical_angle_deg
-        sigma = self.feature_uncertainty
-        tested = self.feature_tests
-        roundness = None
-        if aperture.spec.rounds:
-            roundness = Parameter("roundness", aperture.roundness, sigma.get("roundness"))
-        rim = None
-        if "rim" in aperture.enabled_features or "rim" in tested:
-            rim = Parameter("rim", aperture.rim, sigma.get("rim"))
-        vignetting = None
-        if aperture.vignetting is not None:
-            vignetting = Parameter("vignetting", {"radius": aperture.vignetting.radius, "shift": aperture.vignetting.shift},
-                                   {"radius": sigma.get("vignetting_radius"), "shift": sigma.get("vignetting_shift")})
-        squeeze = None
-        if "squeeze" in aperture.enabled_features or "squeeze" in tested:
-            squeeze = Parameter("squeeze", aperture.squeeze, sigma.get("squeeze"))
-        chromatic = None
-        if aperture.chromatic is not None:
-            chromatic = Parameter("chromatic", {"red": aperture.chromatic.red, "blue": aperture.chromatic.blue},
-                                  {"red": sigma.get("chromatic_red"), "blue": sigma.get("chromatic_blue")})
-        features = {"roundness": roundness, "squeeze": squeeze, "rim": rim, "vignetting": vignetting, "chromatic": chromatic}
-        return {
-            "angle_deg": Parameter("angle_deg", angle, self.angle_uncertainty_deg if angle is not None else None),
-            "diameter_px": Parameter("diameter_px", self.diameter_px, self.diameter_uncertainty_px),
-            "aspect": Parameter("aspect", aperture.aspect),
-            "edge_blur_px": Parameter("edge_blur_px", self.blur_px),
-            **{name: features.get(name) or Parameter(name, None) for name in LENS_FEATURES},
-        }
-
-    def to_json(self) -> dict:
-        """The fit as plain JSON data: shape, the parameters, the candidates tried."""
-        aperture = self.aperture
-        data = {"shape": aperture.shape, "blades": aperture.blades, "symmetry_deg": aperture.symmetry_deg}
-        for name, parameter in self.parameters.items():
-            rounded = parameter.to_json(3)
-            data[name] = rounded["value"]
-            data[UNCERTAINTY_KEYS.get(name, f"{name}_uncertainty")] = rounded["uncertainty"]
-        data.update(
-            focus_side=self.focus_side,
-            sure=self.sure,
-            margin_bic=None if self.margin_bic is None else round(self.margin_bic, 2),
-            discs_fitted=len(self.disc_fits),
-            message=self.message,
-            candidates=[c.to_json() for c in self.candidates],
-        )
-        return data
-
-    def disc_fit(self, disc: Disc) -> PixelFit | None:
-        """The winning family's fit of ``disc`` (in the joint fit), if it was used."""
-        item = self.disc_item(disc)
-        return None if item is None else item.fits.get(self.family.name)
-
-    def disc_item(self, disc: Disc) -> DiscFit | None:
-        """Everything fitted to ``disc``, if it was used."""
-        return next((item for item in self.disc_fits if item.disc.index == disc.index), None)
-
-
-
-#: The real-lens features of design.md §3b; those not estimated are reported as null.
-LENS_FEATURES = ("roundness", "squeeze", "vignetting", "rim", "chromatic")
-#: JSON names of uncertainties that schema 1 named before the ``<name>_uncertainty`` rule (design.md §7, §7b).
-UNCERTAINTY_KEYS = {"angle_deg": "angle_uncertainty_deg", "diameter_px": "diameter_uncertainty_px"}
-#: Blades this round (roundness) give the same answer as the circle: round discs.
-ROUND_ENOUGH = 0.8
 #: A rounded family is fitted where its screen misfit is under this share of the straight one's on some disc ...
 ROUNDER_SCREEN = 0.95
 #: ... of at least this diameter (px): a smaller disc cannot show how round its blades are.
