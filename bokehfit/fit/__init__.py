@@ -40,15 +40,17 @@ import math
 import time
 from collections.abc import Callable
 
-import cv2
 import numpy as np
 
 from bokehfit.apertures import Aperture
-from bokehfit.discs import MIN_FIT_SEEN, USABLE_EVIDENCE, Disc
+from bokehfit.discs import MIN_FIT_SEEN, Disc
 from bokehfit.errors import InputError
+from bokehfit.fit.agreement import combine, consensus_start, disagreeing, outline_misfits, turned_discs, unsupported
+from bokehfit.fit.choice import REGULAR_OUTLINE_MISFIT, choose_discs, slit_aspect
 from bokehfit.fit.chromatic import measure_chromatic
 from bokehfit.fit.families import FAMILIES, Family, families_for
-from bokehfit.fit.pixels import FIT_BOUNDS, DiscCrop, PixelFit, crop_disc, field_position, fit_discs, render_disc_model
+from bokehfit.fit.features import FEATURE_DELTA_BIC, MIN_RIM, add_feature, at_bound, features_to_test
+from bokehfit.fit.pixels import crop_disc, fit_discs
 from bokehfit.fit.result import (
     LENS_FEATURES,
     ROUND_ENOUGH,
@@ -60,8 +62,7 @@ from bokehfit.fit.result import (
     FitOptions,
     Parameter,
 )
-from bokehfit.fit.signature import Ellipse, Screen, fit_ellipse, outline_misfit, screen
-from bokehfit.metrics import angle_error
+from bokehfit.fit.signature import screen
 
 __all__ = [
     "ApertureFit",
@@ -85,315 +86,12 @@ FOCUS_SIDES = ("far", "near", "unknown")
 ROUNDER_SCREEN = 0.95
 #: ... of at least this diameter (px): a smaller disc cannot show how round its blades are.
 ROUNDNESS_MIN_DIAMETER_PX = 16.0
-#: A §3b feature joins the model when it lowers the joint BIC by at least this (Kass & Raftery: "very strong").
-FEATURE_DELTA_BIC = 10.0
-#: An elongated aperture (a slit) is accepted only when at least this many discs show it ...
-MIN_ELONGATED_DISCS = 3
-#: ... at angles within this spread of each other ...
-ELONGATED_ANGLE_SPREAD_DEG = 10.0
-#: ... and aspects within this spread (the aspects' standard deviation).
-ELONGATED_ASPECT_SPREAD = 0.1
-#: A shape with an angle is supported only where the discs' angles spread less than this share of its symmetry.
-ANGLE_AGREEMENT_SHARE = 0.125
-#: Vignetting is tried only when some fitted disc lies at least this far from the centre (half-diagonals) ...
-VIGNETTING_MIN_FIELD = 0.45
-#: ... and those discs' outlines misfit the shape at least this many times as much as the central ones'.
-VIGNETTING_MISFIT_RATIO = 1.5
-#: Its starting barrel: this shift (R0 per half-diagonal; negative: the barrel's centre towards the
-#: image centre, cutting a disc's outer side), and a radius that cuts the farthest disc this far inside its R0.
-VIGNETTING_START_SHIFT = -1.0
-VIGNETTING_START_CUT = 0.85
-#: The rim is tried where discs of at least this diameter (px; smaller ones show no profile) ...
-RIM_MIN_DIAMETER_PX = 20.0
-#: ... leave their rims brighter or darker than their centres under the flat model by this share of the contrast.
-RIM_SIGNAL = 0.04
-#: The squeeze (an anamorphic lens: design.md §3b) is tried where at least MIN_ELONGATED_DISCS discs
-#: are stretched along the frame's axes alike: their outlines' second moments put the long axis
-#: within SQUEEZE_AXIS_DEG of the frame's, the height over width (the squeeze) of their median at
-#: least SQUEEZE_SIGNAL from 1 in ratio, and every disc within SQUEEZE_AGREEMENT of it.
-SQUEEZE_AXIS_DEG = 10.0
-SQUEEZE_SIGNAL = 1.03
-SQUEEZE_AGREEMENT = 0.06
-#: Least |rim| reported: a smaller one changes a disc's profile by under 5 % (below what a photo's discs show).
-MIN_RIM = 0.05
-#: A disc's outline is regular when some aperture shape (not an elongated one) fits it this well:
-#: median radial misfit in equal-area radii. Bokeh discs of a real lens show 0.01–0.05 (noise,
-#: JPEG, a little bloom); out-of-focus petals, leaves, discs cut by a blade and merged glows 0.1
-#: and more. Regular discs are fitted before irregular ones, and a sure fit needs its discs'
-#: median misfit at most this (bokehfit.compare).
-REGULAR_OUTLINE_MISFIT = 0.08
-#: A disc whose outline only an ellipse explains (to REGULAR_OUTLINE_MISFIT) is fitted where a lens
-#: feature accounts for the stretch: at least MIN_ELONGATED_DISCS such discs stretched alike (angles
-#: within ELONGATED_ANGLE_SPREAD_DEG, aspects within ELONGATED_ASPECT_SPREAD: a squeeze, or a slit), or
-#: the cat-eye's: a disc at least VIGNETTING_MIN_FIELD from the centre whose long axis lies within
-#: CATEYE_AXIS_DEG of square to the line from the centre (the barrel cuts the side away from it).
-CATEYE_AXIS_DEG = 20.0
-#: The discs fitted are chosen from this many times the budget (max_discs) of the clearest ones.
-CHOICE_POOL = 4
 #: A shape with more parameters than the circle is kept only where it fits the outlines of at least
 #: this share of the jointly fitted discs better than the circle does (each against its joint fit):
 #: blades are seen on the outlines, not in the light inside them or around them.
 OUTLINE_SUPPORT_SHARE = 0.75
 #: Most discs fitted jointly (the clearest first): the shared parameters are settled well before.
 JOINT_DISCS = 8
-#: A disc disagrees with the consensus when its angle is off by more than this many standard deviations ...
-OUTLIER_SIGMAS = 3.0
-#: ... (never less than this many degrees) ...
-MIN_ANGLE_TOLERANCE_DEG = 3.0
-#: ... or its outline misfits the shape by more than this many times the median misfit (and by at least MIN_OUTLIER_RMS).
-OUTLIER_RMS_FACTOR = 3.0
-MIN_OUTLIER_RMS = 0.05
-
-
-def _order_for_fit(discs: list[Disc], max_discs: int) -> list[Disc]:
-    """The clearest usable discs, at most ``max_discs``: those on their own before those beside or on
-    other light (fitted with that light left out); within each, clean ones first, then edges, then
-    outlines seen in part; the largest and clearest first."""
-    usable = [d for d in discs if d.usable]
-    usable.sort(key=lambda d: (d.overlaps, USABLE_EVIDENCE.index(d.evidence), -d.diameter_px * min(d.snr, 50.0)))
-    return usable[:max_discs]
-
-
-def _outline_class(screens: list[Screen], ellipse: Ellipse | None) -> tuple[int, float]:
-    """How an aperture explains the outline, and the best non-elongated shape's misfit: class 0
-    where a shape that is not elongated fits it to REGULAR_OUTLINE_MISFIT, 1 where only an elongated
-    one does (a slit at the disc's own aspect, or an ellipse: a squeeze, a cat-eye), 2 where none does."""
-    round_misfit = min((s.rms for s in screens if "aspect" not in s.family.aperture.parameters), default=math.inf)
-    if round_misfit <= REGULAR_OUTLINE_MISFIT:
-        return 0, round_misfit
-    stretched = min([s.rms for s in screens] + ([ellipse.misfit] if ellipse is not None else []))
-    return (1 if stretched <= REGULAR_OUTLINE_MISFIT else 2), round_misfit
-
-
-def _stretch_explained(disc: Disc, ellipse: Ellipse, others: list[Ellipse], shape: tuple[int, int]) -> bool:
-    """Whether a lens feature accounts for an elongated disc (CATEYE_AXIS_DEG's note): others
-    stretched alike, or the cat-eye's cut at its place in the frame."""
-    alike = sum(angle_error(ellipse.axis_deg, e.axis_deg, 180.0) <= ELONGATED_ANGLE_SPREAD_DEG
-                and abs(ellipse.aspect - e.aspect) <= ELONGATED_ASPECT_SPREAD for e in others)
-    if alike + 1 >= MIN_ELONGATED_DISCS:
-        return True
-    qx, qy = field_position(disc.center_xy, shape)
-    if math.hypot(qx, qy) < VIGNETTING_MIN_FIELD:
-        return False
-    radial = math.degrees(math.atan2(-qy, qx))  # the line from the centre, in the image (y down)
-    return angle_error(ellipse.axis_deg, radial + 90.0, 180.0) <= CATEYE_AXIS_DEG
-
-
-def _choose_discs(discs: list[Disc], families: tuple[Family, ...], max_discs: int, models: dict,
-                  shape: tuple[int, int]) -> tuple[list[Disc], dict[int, str]]:
-    """The discs fitted, and those set aside with the reason.
-
-    A defocused light is the aperture's image: every disc shows the same outline. So a disc is
-    fitted only where an aperture explains its outline (its own points) to REGULAR_OUTLINE_MISFIT
-    of its radius: some shape, or a shape stretched by what a lens does to every disc or to those
-    at the frame's edge (:func:`_stretch_explained`). Lit leaves and petals, in-focus highlights,
-    patches of sky between branches, discs cut by a blade and glows run together are not, and are
-    set aside with the reason, whatever their clarity. They are chosen from the CHOICE_POOL ·
-    ``max_discs`` clearest (:func:`_order_for_fit`): discs on their own before those beside other
-    light, shapes that are not elongated before elongated ones, each group in that order. The
-    straight families suffice (a rounded polygon lies between its straight one and the circle) and
-    keep the screen cheap; all of them, whatever shapes the fit tries. ``models`` is the fit's memo of
-    model signatures (:func:`~bokehfit.fit.signature.screen`); ``shape`` the photo's (rows, columns)."""
-    pool = _order_for_fit(discs, CHOICE_POOL * max_discs)
-    groups: dict[tuple[bool, int], list[Disc]] = {(False, 0): [], (False, 1): [], (True, 0): [], (True, 1): []}
-    set_aside: dict[int, str] = {}
-    stretched: list[tuple[Disc, Ellipse]] = []
-    for disc in pool:  # discs on their own come first: once max_discs of them are regular, the rest can wait
-        if len(groups[False, 0]) >= max_discs:
-            break
-        screens = screen(disc.outline_xy, families, _slit_aspect(disc), disc.outline_reliable, models)
-        kind, misfit = _outline_class(screens, None)
-        ellipse = None
-        if kind != 0:
-            ellipse = fit_ellipse(disc.outline_xy, disc.outline_reliable)
-            kind, _ = _outline_class(screens, ellipse)
-        if kind == 1 and ellipse is not None:
-            stretched.append((disc, ellipse))
-        elif kind == 1:
-            groups[disc.overlaps, 1].append(disc)
-        elif kind == 0:
-            groups[disc.overlaps, 0].append(disc)
-        else:
-            set_aside[disc.index] = (f"no aperture shape explains its outline (misfit {misfit:.2f} of its radius, "
-                                     f"at most {REGULAR_OUTLINE_MISFIT} for a disc)")
-    for disc, ellipse in stretched:
-        others = [e for d, e in stretched if d is not disc]
-        if _stretch_explained(disc, ellipse, others, shape):
-            groups[disc.overlaps, 1].append(disc)
-        else:
-            set_aside[disc.index] = (f"stretched (aspect {ellipse.aspect:.2f} at {ellipse.axis_deg:.0f}°) as no other "
-                                     "disc is and not as a cat-eye at its place: not the aperture's image")
-    order = {disc.index: i for i, disc in enumerate(pool)}
-    return [disc for group in groups.values() for disc in sorted(group, key=lambda d: order[d.index])][:max_discs], set_aside
-
-
-def _slit_aspect(disc: Disc) -> float:
-    (_, _), (a, b), _ = cv2.minAreaRect(disc.outline_xy.astype(np.float32))
-    return float(np.clip(math.sqrt(min(a, b) / max(a, b, 1e-9)), 0.02, 1.0))
-
-
-def _circular_mean(angles: np.ndarray, weights: np.ndarray, period: float) -> tuple[float, float]:
-    """Weighted circular mean modulo ``period`` and the spread (circular standard deviation)."""
-    phase = np.radians(angles) * (360.0 / period)
-    c, s = np.sum(weights * np.cos(phase)), np.sum(weights * np.sin(phase))
-    mean = math.degrees(math.atan2(s, c)) * period / 360.0 % period
-    resultant = math.hypot(c, s) / max(np.sum(weights), 1e-300)
-    spread = math.degrees(math.sqrt(max(-2.0 * math.log(max(resultant, 1e-12)), 0.0))) * period / 360.0
-    return mean, spread
-
-
-def _angle_offsets(angles: np.ndarray, mean: float, period: float) -> np.ndarray:
-    """Signed differences of ``angles`` from ``mean`` modulo ``period``, in (−period/2, period/2]."""
-    return (np.asarray(angles) - mean + 0.5 * period) % period - 0.5 * period
-
-
-def _angle_sigmas(fits: list[PixelFit]) -> np.ndarray:
-    sigmas = np.array([f.uncertainty.get("angle_deg", np.nan) for f in fits])
-    return np.where(np.isfinite(sigmas) & (sigmas > 0), sigmas, 1.0)
-
-
-def _combine(family: Family, fits: list[PixelFit], screens: list[Screen]) -> CandidateModel:
-    diameters = np.array([f.diameter_px for f in fits])
-    angle = uncertainty = None
-    symmetry = family.aperture.symmetry_deg
-    if family.aperture.has_angle:
-        angles = np.array([f.angle_deg for f in fits])
-        sigmas = _angle_sigmas(fits)
-        angle, spread = _circular_mean(angles, 1.0 / sigmas**2, symmetry)
-        within = 1.0 / math.sqrt(np.sum(1.0 / sigmas**2))
-        uncertainty = math.hypot(spread / math.sqrt(len(fits)), within)
-    return CandidateModel(
-        family=family,
-        bic=float(sum(f.bic for f in fits)),
-        delta_bic=0.0,
-        angle_deg=angle,
-        angle_uncertainty_deg=uncertainty,
-        diameter_px=float(np.median(diameters)),
-        screen_rms=float(np.median([s.rms for s in screens])),
-        roundness=(float(np.median([f.aperture.roundness for f in fits]))
-                   if "roundness" in family.aperture.parameters else None),
-    )
-
-
-def _elongation_doubt(family: Family, fits: list[PixelFit]) -> str | None:
-    """Why an elongated family (a slit) is not supported by ``fits``; None when it is, or when it is not elongated.
-
-    One blob stretched by an in-focus edge, a cat-eye at the frame's edge or
-    two merged discs looks like a slit; an elongated aperture shows as the
-    same elongation on several discs.
-    """
-    if "aspect" not in family.aperture.parameters:
-        return None
-    if len(fits) < MIN_ELONGATED_DISCS:
-        return f"an elongated aperture needs at least {MIN_ELONGATED_DISCS} discs that agree (only {len(fits)} fitted)"
-    angles = np.array([f.angle_deg for f in fits])
-    _, spread = _circular_mean(angles, np.ones(len(angles)), family.aperture.symmetry_deg)
-    aspects = np.array([f.aperture.aspect for f in fits])
-    if spread > ELONGATED_ANGLE_SPREAD_DEG or np.std(aspects) > ELONGATED_ASPECT_SPREAD:
-        return (f"the discs do not agree on one elongation (angles spread {spread:.0f}°, "
-                f"aspects {aspects.min():.2f}–{aspects.max():.2f})")
-    return None
-
-
-def _turned(family: Family, fits: list[PixelFit]) -> list[bool]:
-    """Which discs show the aperture turned by 180° from the majority (design.md §2: near and far discs).
-
-    Only a shape of odd symmetry tells: turned by 180° it sits half its
-    symmetry away. The majority is taken as seen unturned.
-    """
-    aperture = family.aperture
-    if not aperture.has_angle or not aperture.odd_symmetry:
-        return [False] * len(fits)
-    period = aperture.symmetry_deg
-    angles = np.array([f.angle_deg for f in fits])
-    mean, _ = _circular_mean(angles, 1.0 / _angle_sigmas(fits) ** 2, 0.5 * period)
-    turned = np.abs(_angle_offsets(angles, mean, period)) > 0.25 * period
-    if 2 * int(turned.sum()) > len(fits):
-        turned = ~turned
-    return [bool(t) for t in turned]
-
-
-def _unturned_angles(family: Family, fits: list[PixelFit], turned: list[bool]) -> np.ndarray:
-    """The discs' angles as the unturned discs show the aperture."""
-    half = 0.5 * family.aperture.symmetry_deg
-    return np.array([f.angle_deg - (half if t else 0.0) for f, t in zip(fits, turned)]) % family.aperture.symmetry_deg
-
-
-def _unsupported(family: Family, fits: list[PixelFit]) -> str | None:
-    """Why the discs do not support ``family`` together (None when they do): an elongation they do
-    not share (:func:`_elongation_doubt`), or angles that scatter (robust spread over
-    ANGLE_AGREEMENT_SHARE of the symmetry, at least MIN_ANGLE_TOLERANCE_DEG) with two discs or more."""
-    doubt = _elongation_doubt(family, fits)
-    if doubt is not None or not family.aperture.has_angle or len(fits) < 2:
-        return doubt
-    period = family.aperture.symmetry_deg
-    angles = _unturned_angles(family, fits, _turned(family, fits))
-    mean, _ = _circular_mean(angles, np.ones(len(angles)), period)
-    spread = 1.4826 * float(np.median(np.abs(_angle_offsets(angles, mean, period))))
-    if spread > max(ANGLE_AGREEMENT_SHARE * period, MIN_ANGLE_TOLERANCE_DEG):
-        return f"the discs put its angle in different places (spread {spread:.0f}° of its {period:.0f}° symmetry)"
-    return None
-
-
-def _disagreeing(family: Family, fits: list[PixelFit], screens: list[Screen], turned: list[bool]) -> dict[int, str]:
-    """Discs (by position in ``fits``) whose shape or angle the others' consensus does not share, with the reason."""
-    out: dict[int, str] = {}
-    if len(fits) < 3:
-        return out
-    rms = np.array([s.rms for s in screens])
-    limit = max(OUTLIER_RMS_FACTOR * float(np.median(rms)), MIN_OUTLIER_RMS)
-    for i in np.flatnonzero(rms > limit):
-        out[int(i)] = (f"its outline is not the shape the other discs share (misfit {rms[i]:.3f} of its radius, "
-                       f"median {np.median(rms):.3f})")
-    if family.aperture.has_angle:
-        period = family.aperture.symmetry_deg
-        sigmas = _angle_sigmas(fits)
-        angles = _unturned_angles(family, fits, turned)
-        mean, _ = _circular_mean(angles, 1.0 / sigmas**2, period)
-        offsets = _angle_offsets(angles, mean, period)
-        robust = 1.4826 * float(np.median(np.abs(offsets)))
-        for i, (offset, sigma) in enumerate(zip(offsets, sigmas)):
-            tolerance = max(OUTLIER_SIGMAS * math.hypot(robust, sigma), MIN_ANGLE_TOLERANCE_DEG)
-            if abs(offset) > tolerance and i not in out:
-                out[i] = f"its angle is {offset:+.1f}° from the other discs' ({mean:.1f}°, tolerance {tolerance:.1f}°)"
-    if len(out) * 2 > len(fits):  # no majority to disagree with: keep them all, the judge will doubt
-        return {}
-    return out
-
-
-def _consensus_start(family: Family, fits: list[PixelFit], turned: list[bool]) -> Aperture:
-    """The family's aperture at the discs' consensus: circular mean of the angle (as unturned discs show it), median of the rest."""
-    values = {}
-    for name, parameter in fits[0].aperture.parameters.items():
-        own = np.array([f.aperture.values[name] for f in fits])
-        if parameter.periodic is not None:
-            own = _unturned_angles(family, fits, turned)
-            values[name] = _circular_mean(own, 1.0 / _angle_sigmas(fits) ** 2, parameter.periodic)[0]
-        else:
-            values[name] = float(np.median(own))
-    return family.aperture.replace(**values) if values else family.aperture
-
-
-def _misfits(discs: list[Disc], aperture: Aperture, fits: list[PixelFit]) -> np.ndarray:
-    """Outline misfit (equal-area radii) of each of ``discs`` to one ``aperture``, as it shows at the disc's field position."""
-    return np.array([outline_misfit(d.outline_xy, aperture, f.field_position) for d, f in zip(discs, fits)])
-
-
-def _at_bound(aperture: Aperture, feature: str) -> bool:
-    """Whether a feature's fitted value sits at the end of its search range: the discs pushed it
-    there to absorb something else (a misfit shape, the surround), not to describe the lens."""
-    parameters = aperture.parameters
-    values = aperture.values
-    for name in parameters:
-        if not name.startswith(feature):
-            continue
-        low, high = FIT_BOUNDS.get(name, parameters[name].bounds)
-        span = high - low
-        if name != "vignetting_radius" and min(values[name] - low, high - values[name]) < 0.01 * span:
-            return True
-        if name == "vignetting_radius" and high - values[name] < 0.01 * span:
-            return True  # a barrel at the largest radius cuts nothing the start did not
-    return False
 
 
 def _fit_start(aperture: Aperture) -> Aperture:
@@ -401,90 +99,6 @@ def _fit_start(aperture: Aperture) -> Aperture:
     if "roundness" in aperture.parameters:
         return aperture.replace(roundness=max(aperture.roundness, 0.05))
     return aperture
-
-
-def _add_feature(aperture: Aperture, feature: str, fits: list[PixelFit], discs: list[Disc]) -> Aperture:
-    """``aperture`` with ``feature`` switched on at a start from which the fit can move.
-
-    The vignetting starts as a barrel that just cuts the disc farthest from the centre; the
-    squeeze at the one the discs' outlines share.
-    """
-    if feature == "squeeze":
-        return aperture.with_features("squeeze").replace(squeeze=_squeeze_signal(discs) or 1.0)
-    if feature == "vignetting":
-        farthest = max(math.hypot(*f.field_position) for f in fits)
-        shift = VIGNETTING_START_SHIFT
-        return aperture.replace(vignetting_radius=abs(shift) * farthest + VIGNETTING_START_CUT, vignetting_shift=shift)
-    if feature == "rim":
-        return aperture.with_features("rim").replace(rim=0.2)
-    return aperture.with_features(feature)
-
-
-def _rim_signal(crop: DiscCrop, fit: PixelFit) -> float | None:
-    """How much brighter the flat model leaves a disc's rim than its centre, over its contrast
-    (None for a saturated disc, whose profile is clipped, or one too small to have a centre)."""
-    if crop.censored is not None or fit.diameter_px / crop.factor < RIM_MIN_DIAMETER_PX / 2:
-        return None
-    values = crop.values_of(fit)
-    model, background, plateau = render_disc_model(fit.aperture, values, crop.size, crop.data, crop.field_position,
-                                                   ignored=crop.ignored)
-    rows, cols = np.indices((crop.size, crop.size))
-    radius = np.hypot(cols - values["cx"], rows - values["cy"]).ravel() / (0.5 * values["diameter_px"])
-    if crop.ignored is not None:
-        radius[crop.ignored] = np.inf  # not the disc's light: in neither ring
-    residual = crop.data - model
-    inner, rim = residual[radius < 0.5], residual[(radius > 0.65) & (radius < 0.9)]
-    contrast = plateau - background
-    if not len(inner) or not len(rim) or abs(contrast) < 1e-12:
-        return None
-    return float((rim.mean() - inner.mean()) / contrast)
-
-
-def _squeeze_signal(discs: list[Disc]) -> float | None:
-    """The squeeze the discs' outlines share (module constants), or None where they share none.
-
-    A squeezed aperture scales x by 1/√s and y by √s after its rotation, so every disc's height
-    over width, from its outline's second moments about the frame's axes, is s.
-    """
-    if len(discs) < MIN_ELONGATED_DISCS:
-        return None
-    squeezes = []
-    for disc in discs:
-        moments = cv2.moments(disc.outline_xy.astype(np.float32))
-        mu20, mu02, mu11 = moments["mu20"], moments["mu02"], moments["mu11"]
-        if mu20 <= 0 or mu02 <= 0:
-            return None
-        axis = 0.5 * math.degrees(math.atan2(2.0 * mu11, mu20 - mu02))  # the long axis's, from x
-        squeeze = math.sqrt(mu02 / mu20)
-        off_axis = min(abs(axis), abs(abs(axis) - 90.0))
-        if off_axis > SQUEEZE_AXIS_DEG and abs(math.log(squeeze)) > math.log(SQUEEZE_SIGNAL):
-            return None  # stretched askew: not the frame-aligned squeeze of an anamorphic lens
-        squeezes.append(squeeze)
-    logs = np.log(squeezes)
-    middle = float(np.median(logs))
-    if abs(middle) < math.log(SQUEEZE_SIGNAL) or np.max(np.abs(logs - middle)) > SQUEEZE_AGREEMENT:
-        return None
-    return math.exp(middle)
-
-
-def _feature_tests(fits: list[PixelFit], discs: list[Disc], screens: list[Screen], crops: list[DiscCrop]) -> tuple[str, ...]:
-    """The §3b features worth testing on these discs: the rim where some disc is a ring (a bright rim)
-    or has a bright centre, or the flat model leaves the discs' rims brighter or darker than their centres (RIM_SIGNAL of the
-    contrast, median over the discs that show a profile); the vignetting where at least 3 discs were
-    fitted, some lie far enough from the centre to be cut (VIGNETTING_MIN_FIELD), and those misfit
-    the shape more than the central ones do (or none is central); the squeeze where the discs are
-    stretched alike along the frame's axes (:func:`_squeeze_signal`)."""
-    signals = [v for v in (_rim_signal(c, f) for c, f in zip(crops, fits)) if v is not None]
-    profiled = bool(signals) and abs(float(np.median(signals))) >= RIM_SIGNAL
-    features = ["rim"] if profiled or any(d.ring or d.bright_centre for d in discs) else []
-    field = np.array([math.hypot(*f.field_position) for f in fits])
-    rms = np.array([s.rms for s in screens])
-    outer, inner = rms[field >= VIGNETTING_MIN_FIELD], rms[field < VIGNETTING_MIN_FIELD]
-    if len(discs) >= 3 and len(outer) and (not len(inner) or np.median(outer) > VIGNETTING_MISFIT_RATIO * np.median(inner)):
-        features.append("vignetting")
-    if _squeeze_signal(discs) is not None:
-        features.append("squeeze")
-    return tuple(features)
 
 
 def fit_aperture(
@@ -550,7 +164,7 @@ def fit_aperture(
 
     models: dict = {}  # the model signatures of the screens, made once for all discs
     # Whether a blob is an aperture's image does not hang on the shapes the caller lets the fit try.
-    chosen, set_aside = _choose_discs(discs, FAMILIES, options.max_discs, models, np.shape(luminance))
+    chosen, set_aside = choose_discs(discs, FAMILIES, options.max_discs, models, np.shape(luminance))
     clock("choose")
     if not chosen:
         flagged = {
@@ -569,7 +183,7 @@ def fit_aperture(
     # rounded 7-gon looks more like a 12-gon than a 7-gon to a straight-only screen.
     rounded_of = {f: f.rounded for f in families if f.rounded is not None}
     screen_families = (*families, *rounded_of.values())
-    screened = [screen(d.outline_xy, screen_families, _slit_aspect(d), d.outline_reliable, models) for d in chosen]
+    screened = [screen(d.outline_xy, screen_families, slit_aspect(d), d.outline_reliable, models) for d in chosen]
     screens_of = [{s.family: s for s in disc_screens} for disc_screens in screened]
     mean_rms = {f: np.mean([found[f].rms for found in screens_of]) for f in screen_families}
     best_rms = {f: min(mean_rms[f], mean_rms[rounded_of[f]]) if f in rounded_of else mean_rms[f] for f in families}
@@ -600,7 +214,7 @@ def fit_aperture(
         if progress is not None:
             progress(i + 1, len(chosen))
     models = [
-        _combine(family, [item.fits[family.name] for item in disc_fits], [found[family] for found in screens_of[: len(disc_fits)]])
+        combine(family, [item.fits[family.name] for item in disc_fits], [found[family] for found in screens_of[: len(disc_fits)]])
         for family in candidates
     ]
     models.sort(key=lambda m: m.bic)
@@ -609,7 +223,7 @@ def fit_aperture(
     notes = []
     winner = models[0].family
     for model in models:
-        doubt = _unsupported(model.family, [item.fits[model.family.name] for item in disc_fits])
+        doubt = unsupported(model.family, [item.fits[model.family.name] for item in disc_fits])
         if doubt is None:
             winner = model.family
             break
@@ -627,8 +241,8 @@ def fit_aperture(
     # Consensus: discs whose shape or angle the others do not share are left out, with the reason.
     winner_fits = [item.fits[winner.name] for item in disc_fits]
     winner_screens = [found[winner] for found in screens_of]
-    turned = _turned(winner, winner_fits)
-    outliers = _disagreeing(winner, winner_fits, winner_screens, turned)
+    turned = turned_discs(winner, winner_fits)
+    outliers = disagreeing(winner, winner_fits, winner_screens, turned)
     rejected = {disc_fits[i].disc.index: reason for i, reason in outliers.items()}
     kept = [i for i in range(len(disc_fits)) if i not in outliers]
 
@@ -638,19 +252,19 @@ def fit_aperture(
     joint_crops = [crops[i] for i in joint_ids]
     noise = [winner_fits[i].noise for i in joint_ids]
     disc_starts = [crops[i].values_of(winner_fits[i]) for i in joint_ids]
-    aperture = _consensus_start(winner, [winner_fits[i] for i in joint_ids], [turned[i] for i in joint_ids])
+    aperture = consensus_start(winner, [winner_fits[i] for i in joint_ids], [turned[i] for i in joint_ids])
     joint = fit_discs(joint_crops, winner, aperture, noise=noise, disc_starts=disc_starts)
     clock("joint")
     feature_tests: dict[str, float] = {}
     joint_discs = [chosen[i] for i in joint_ids]
-    tests = _feature_tests([winner_fits[i] for i in joint_ids], joint_discs, [winner_screens[i] for i in joint_ids],
+    tests = features_to_test([winner_fits[i] for i in joint_ids], joint_discs, [winner_screens[i] for i in joint_ids],
                            joint_crops)
     for feature in tests:
-        trial = fit_discs(joint_crops, winner, _add_feature(joint.aperture, feature, joint.fits, joint_discs), noise=noise,
+        trial = fit_discs(joint_crops, winner, add_feature(joint.aperture, feature, joint.fits, joint_discs), noise=noise,
                           disc_starts=[crops[i].values_of(f) for i, f in zip(joint_ids, joint.fits)])
         feature_tests[feature] = joint.bic - trial.bic
         visible = feature != "rim" or abs(trial.aperture.rim) >= MIN_RIM
-        if feature_tests[feature] >= FEATURE_DELTA_BIC and visible and not _at_bound(trial.aperture, feature):
+        if feature_tests[feature] >= FEATURE_DELTA_BIC and visible and not at_bound(trial.aperture, feature):
             joint = trial
     clock("features")
     # With a feature on, the shape is chosen again between the winner and the simplest model:
@@ -669,7 +283,7 @@ def fit_aperture(
         start_values = {n: v for n, v in joint.aperture.values.items() if any(n.startswith(f) for f in added)}
         plain = simplest.aperture.with_features(*added).replace(**start_values)
         if "squeeze" in added and "squeeze" not in start_values:
-            plain = _add_feature(plain, "squeeze", joint.fits, joint_discs)
+            plain = add_feature(plain, "squeeze", joint.fits, joint_discs)
         untouched = [dataclasses.replace(c, turned=False) for c in joint_crops]
 
         def plain_fit():
@@ -679,14 +293,14 @@ def fit_aperture(
         # With no feature on, the plain circle has no parameter that changes its outline: no fit is
         # needed to measure how well it fits the outlines, only to take its place.
         trial = plain_fit() if added else None
-        winner_misfits = _misfits(joint_discs, joint.aperture, joint.fits)
-        plain_misfits = _misfits(joint_discs, *((trial.aperture, trial.fits) if trial else (plain, joint.fits)))
+        winner_misfits = outline_misfits(joint_discs, joint.aperture, joint.fits)
+        plain_misfits = outline_misfits(joint_discs, *((trial.aperture, trial.fits) if trial else (plain, joint.fits)))
         shown = float(np.mean(plain_misfits > winner_misfits))
         switch = None
         if trial is not None and trial.bic <= joint.bic:
             switch = (f"with the {' and the '.join(added)} in the model, the {simplest.aperture.display_name} explains "
                       f"the discs better than the {winner.aperture.display_name} chosen without (ΔBIC {joint.bic - trial.bic:.0f})")
-        elif (doubt := _unsupported(winner, [winner_fits[i] for i in kept])) is not None:
+        elif (doubt := unsupported(winner, [winner_fits[i] for i in kept])) is not None:
             switch = f"a {winner.aperture.display_name} does not hold on all {len(kept)} discs fitted: {doubt}"
         elif shown < OUTLINE_SUPPORT_SHARE:
             switch = (f"the {winner.aperture.display_name} that the discs' pixels favour fits the outlines of only "
@@ -709,11 +323,11 @@ def fit_aperture(
     clock("refit")
 
     best_bic = models[0].bic
-    winner_model = _combine(winner, [final[i] for i in kept], [winner_screens[i] for i in kept])
+    winner_model = combine(winner, [final[i] for i in kept], [winner_screens[i] for i in kept])
     if winner_model.angle_deg is not None:  # every disc shares the joint aperture: its angle, not a mean of copies
         winner_model = dataclasses.replace(winner_model, angle_deg=joint.aperture.canonical_angle_deg)
     if seen_aperture.vignetting is not None:  # the outlines against the cut each disc shows, not the whole shape
-        misfits = _misfits([disc_fits[i].disc for i in kept], seen_aperture, [final[i] for i in kept])
+        misfits = outline_misfits([disc_fits[i].disc for i in kept], seen_aperture, [final[i] for i in kept])
         winner_model = dataclasses.replace(winner_model, screen_rms=float(np.median(misfits)))
     models = [
         dataclasses.replace(winner_model if m.family is winner else m, bic=m.bic, delta_bic=m.bic - best_bic)

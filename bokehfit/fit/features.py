@@ -1,0 +1,148 @@
+"""The lens's §3b features that the joint fit tries: which the discs ask for, and where each starts.
+
+The rim where discs show a profile, the vignetting where outer discs misfit the shape more than
+central ones, the squeeze where the discs are stretched alike along the frame's axes
+(:func:`features_to_test`). A feature joins the model where it lowers the joint BIC by at least
+``FEATURE_DELTA_BIC``, shows (a rim of at least ``MIN_RIM``) and does not sit at the end of its
+range (:func:`at_bound`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+
+from bokehfit.apertures import Aperture
+from bokehfit.discs import Disc
+from bokehfit.fit.agreement import MIN_ELONGATED_DISCS
+from bokehfit.fit.pixels import FIT_BOUNDS, DiscCrop, PixelFit, render_disc_model
+from bokehfit.fit.signature import Screen
+
+__all__ = ["add_feature", "at_bound", "features_to_test", "FEATURE_DELTA_BIC", "MIN_RIM", "VIGNETTING_MIN_FIELD"]
+
+#: A §3b feature joins the model when it lowers the joint BIC by at least this (Kass & Raftery: "very strong").
+FEATURE_DELTA_BIC = 10.0
+#: Vignetting is tried only when some fitted disc lies at least this far from the centre (half-diagonals) ...
+VIGNETTING_MIN_FIELD = 0.45
+#: ... and those discs' outlines misfit the shape at least this many times as much as the central ones'.
+VIGNETTING_MISFIT_RATIO = 1.5
+#: Its starting barrel: this shift (R0 per half-diagonal; negative: the barrel's centre towards the
+#: image centre, cutting a disc's outer side), and a radius that cuts the farthest disc this far inside its R0.
+VIGNETTING_START_SHIFT = -1.0
+VIGNETTING_START_CUT = 0.85
+#: The rim is tried where discs of at least this diameter (px; smaller ones show no profile) ...
+RIM_MIN_DIAMETER_PX = 20.0
+#: ... leave their rims brighter or darker than their centres under the flat model by this share of the contrast.
+RIM_SIGNAL = 0.04
+#: The squeeze (an anamorphic lens: design.md §3b) is tried where at least MIN_ELONGATED_DISCS discs
+#: are stretched along the frame's axes alike: their outlines' second moments put the long axis
+#: within SQUEEZE_AXIS_DEG of the frame's, the height over width (the squeeze) of their median at
+#: least SQUEEZE_SIGNAL from 1 in ratio, and every disc within SQUEEZE_AGREEMENT of it.
+SQUEEZE_AXIS_DEG = 10.0
+SQUEEZE_SIGNAL = 1.03
+SQUEEZE_AGREEMENT = 0.06
+#: Least |rim| reported: a smaller one changes a disc's profile by under 5 % (below what a photo's discs show).
+MIN_RIM = 0.05
+
+
+def at_bound(aperture: Aperture, feature: str) -> bool:
+    """Whether a feature's fitted value sits at the end of its search range: the discs pushed it
+    there to absorb something else (a misfit shape, the surround), not to describe the lens."""
+    parameters = aperture.parameters
+    values = aperture.values
+    for name in parameters:
+        if not name.startswith(feature):
+            continue
+        low, high = FIT_BOUNDS.get(name, parameters[name].bounds)
+        span = high - low
+        if name != "vignetting_radius" and min(values[name] - low, high - values[name]) < 0.01 * span:
+            return True
+        if name == "vignetting_radius" and high - values[name] < 0.01 * span:
+            return True  # a barrel at the largest radius cuts nothing the start did not
+    return False
+
+
+def add_feature(aperture: Aperture, feature: str, fits: list[PixelFit], discs: list[Disc]) -> Aperture:
+    """``aperture`` with ``feature`` switched on at a start from which the fit can move.
+
+    The vignetting starts as a barrel that just cuts the disc farthest from the centre; the
+    squeeze at the one the discs' outlines share.
+    """
+    if feature == "squeeze":
+        return aperture.with_features("squeeze").replace(squeeze=_squeeze_signal(discs) or 1.0)
+    if feature == "vignetting":
+        farthest = max(math.hypot(*f.field_position) for f in fits)
+        shift = VIGNETTING_START_SHIFT
+        return aperture.replace(vignetting_radius=abs(shift) * farthest + VIGNETTING_START_CUT, vignetting_shift=shift)
+    if feature == "rim":
+        return aperture.with_features("rim").replace(rim=0.2)
+    return aperture.with_features(feature)
+
+
+def _rim_signal(crop: DiscCrop, fit: PixelFit) -> float | None:
+    """How much brighter the flat model leaves a disc's rim than its centre, over its contrast
+    (None for a saturated disc, whose profile is clipped, or one too small to have a centre)."""
+    if crop.censored is not None or fit.diameter_px / crop.factor < RIM_MIN_DIAMETER_PX / 2:
+        return None
+    values = crop.values_of(fit)
+    model, background, plateau = render_disc_model(fit.aperture, values, crop.size, crop.data, crop.field_position,
+                                                   ignored=crop.ignored)
+    rows, cols = np.indices((crop.size, crop.size))
+    radius = np.hypot(cols - values["cx"], rows - values["cy"]).ravel() / (0.5 * values["diameter_px"])
+    if crop.ignored is not None:
+        radius[crop.ignored] = np.inf  # not the disc's light: in neither ring
+    residual = crop.data - model
+    inner, rim = residual[radius < 0.5], residual[(radius > 0.65) & (radius < 0.9)]
+    contrast = plateau - background
+    if not len(inner) or not len(rim) or abs(contrast) < 1e-12:
+        return None
+    return float((rim.mean() - inner.mean()) / contrast)
+
+
+def _squeeze_signal(discs: list[Disc]) -> float | None:
+    """The squeeze the discs' outlines share (module constants), or None where they share none.
+
+    A squeezed aperture scales x by 1/√s and y by √s after its rotation, so every disc's height
+    over width, from its outline's second moments about the frame's axes, is s.
+    """
+    if len(discs) < MIN_ELONGATED_DISCS:
+        return None
+    squeezes = []
+    for disc in discs:
+        moments = cv2.moments(disc.outline_xy.astype(np.float32))
+        mu20, mu02, mu11 = moments["mu20"], moments["mu02"], moments["mu11"]
+        if mu20 <= 0 or mu02 <= 0:
+            return None
+        axis = 0.5 * math.degrees(math.atan2(2.0 * mu11, mu20 - mu02))  # the long axis's, from x
+        squeeze = math.sqrt(mu02 / mu20)
+        off_axis = min(abs(axis), abs(abs(axis) - 90.0))
+        if off_axis > SQUEEZE_AXIS_DEG and abs(math.log(squeeze)) > math.log(SQUEEZE_SIGNAL):
+            return None  # stretched askew: not the frame-aligned squeeze of an anamorphic lens
+        squeezes.append(squeeze)
+    logs = np.log(squeezes)
+    middle = float(np.median(logs))
+    if abs(middle) < math.log(SQUEEZE_SIGNAL) or np.max(np.abs(logs - middle)) > SQUEEZE_AGREEMENT:
+        return None
+    return math.exp(middle)
+
+
+def features_to_test(fits: list[PixelFit], discs: list[Disc], screens: list[Screen], crops: list[DiscCrop]) -> tuple[str, ...]:
+    """The §3b features worth testing on these discs: the rim where some disc is a ring (a bright rim)
+    or has a bright centre, or the flat model leaves the discs' rims brighter or darker than their centres (RIM_SIGNAL of the
+    contrast, median over the discs that show a profile); the vignetting where at least 3 discs were
+    fitted, some lie far enough from the centre to be cut (VIGNETTING_MIN_FIELD), and those misfit
+    the shape more than the central ones do (or none is central); the squeeze where the discs are
+    stretched alike along the frame's axes (:func:`_squeeze_signal`)."""
+    signals = [v for v in (_rim_signal(c, f) for c, f in zip(crops, fits)) if v is not None]
+    profiled = bool(signals) and abs(float(np.median(signals))) >= RIM_SIGNAL
+    features = ["rim"] if profiled or any(d.ring or d.bright_centre for d in discs) else []
+    field = np.array([math.hypot(*f.field_position) for f in fits])
+    rms = np.array([s.rms for s in screens])
+    outer, inner = rms[field >= VIGNETTING_MIN_FIELD], rms[field < VIGNETTING_MIN_FIELD]
+    if len(discs) >= 3 and len(outer) and (not len(inner) or np.median(outer) > VIGNETTING_MISFIT_RATIO * np.median(inner)):
+        features.append("vignetting")
+    if _squeeze_signal(discs) is not None:
+        features.append("squeeze")
+    return tuple(features)
