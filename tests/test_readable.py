@@ -17,7 +17,7 @@ import re
 import pytest
 from test_survey import API_OPTIONS, write_render
 
-from bokehfit.compare import judge
+from bokehfit.judging import judge
 from bokehfit.optics import estimate_fstop
 from bokehfit.report.html import build_html
 

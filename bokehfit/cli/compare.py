@@ -15,7 +15,8 @@ import sys
 from pathlib import Path
 
 from bokehfit.cli.arg_types import arg_type
-from bokehfit.compare import Comparison, compare_photo
+from bokehfit.compare import compare_photo
+from bokehfit.comparison import Comparison
 from bokehfit.discs import COMPARE_MIN_DIAMETER_PX, DEFAULT_MAX_DIAMETER_PX, DEFAULT_MIN_DIAMETER_PX
 from bokehfit.errors import InputError, NoResultError, check_positive
 from bokehfit.fit import FOCUS_SIDES

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from bokehfit.compare import Comparison
+from bokehfit.comparison import Comparison
 from bokehfit.uncertainty import plus_minus
 from bokehfit.words import diameter_text, distance_text, evidence_words, fstop_text, kernel_words, table_candidates
 from bokehfit.fit.pixels import model_window

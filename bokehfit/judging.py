@@ -1,0 +1,98 @@
+"""How sure a fit is: the stated thresholds of ``compare``'s verdict, and the doubts they raise.
+
+:func:`judge` turns a fit's evidence (the runner-up's margin, the notes, the discs'
+outlines, how many discs, their overlap with the kernel, their size and contrast) into
+the doubts that make a result ``unsure`` and the reason that makes it ``no_fit``;
+:func:`short_doubts` says the same doubts in a few words each for the verdict's first
+sentence. Both read the thresholds below, which the docs state.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from bokehfit.fit import REGULAR_OUTLINE_MISFIT, ApertureFit
+from bokehfit.words import article
+
+__all__ = [
+    "FAINT_CONTRAST_REL",
+    "MIN_ACCEPTABLE_IOU",
+    "MIN_SURE_DISCS",
+    "MIN_SURE_IOU",
+    "SMALL_DISC_PX",
+    "judge",
+    "short_doubts",
+]
+
+#: A fit is acceptable when the discs match the kernel at least this well (median IoU) ...
+MIN_ACCEPTABLE_IOU = 0.6
+#: ... and sure when, besides a clear BIC margin, they match this well with at least MIN_SURE_DISCS discs.
+MIN_SURE_IOU = 0.85
+MIN_SURE_DISCS = 3
+#: ... and the discs are not both small and faint: under SMALL_DISC_PX (median) and standing less than
+#: FAINT_CONTRAST_REL of their background above it (median), an outline of a few hundred pixels is set
+#: by a few code values of the photo's tone curve, grain and compression as much as by the aperture.
+SMALL_DISC_PX = 64.0
+FAINT_CONTRAST_REL = 0.5
+# ... and the discs' outlines follow the shape: median radial misfit (in equal-area radii) at most
+# bokehfit.fit.REGULAR_OUTLINE_MISFIT, the fit's "regular" outline (the fit's constant, read here).
+
+
+def judge(fit: ApertureFit, metrics: dict[str, float | None]) -> tuple[list[str], str | None]:
+    """Doubts about a fit, and the reason to reject it, from the evidence (stated thresholds)."""
+    doubts = []
+    if fit.close_runner_up:
+        doubts.append(f"the runner-up ({fit.runner_up.family.aperture.display_name}) fits almost as well")
+    doubts.extend(fit.notes)
+    if fit.outline_misfit > REGULAR_OUTLINE_MISFIT:
+        doubts.append(f"the discs' outlines are irregular (median misfit {fit.outline_misfit:.2f} of their radius to the "
+                      f"best shape, {REGULAR_OUTLINE_MISFIT} for a sure fit): blobs that say little about the aperture")
+    fitted = len(fit.disc_fits)
+    if fitted < MIN_SURE_DISCS:
+        doubts.append(f"only {fitted} disc{' was' if fitted == 1 else 's were'} clean enough to fit")
+    iou = metrics.get("iou")
+    if iou is not None and iou < MIN_SURE_IOU:
+        doubts.append(f"the discs match the kernel only loosely (median overlap IoU {iou:.2f}, {MIN_SURE_IOU} for a sure fit)")
+    faint = _small_and_faint(fit)
+    if faint:
+        doubts.append(f"the discs are small and faint (median {faint[0]:.0f} px, {faint[1]:.0%} above their background;"
+                      f" {SMALL_DISC_PX:.0f} px or {FAINT_CONTRAST_REL:.0%} for a sure fit): their outlines follow the"
+                      " photo's tone curve, grain and compression as much as the aperture")
+    rejection = None
+    if iou is not None and iou < MIN_ACCEPTABLE_IOU:
+        rejection = (
+            f"the discs' outlines do not match even the best model ({fit.family.name}) "
+            f"(median overlap IoU {iou:.2f}, at least {MIN_ACCEPTABLE_IOU} needed)"
+        )
+    return doubts, rejection
+
+
+def _small_and_faint(fit: ApertureFit) -> tuple[float, float] | None:
+    """The fitted discs' median diameter and median contrast over their background (a share of it), where
+    both are under SMALL_DISC_PX and FAINT_CONTRAST_REL; else None."""
+    discs = [item.disc for item in fit.disc_fits]
+    if not discs:
+        return None
+    diameter = float(np.median([d.diameter_px for d in discs]))
+    contrast = float(np.median([(d.plateau - d.background) / max(d.background, 1e-6) for d in discs]))
+    return (diameter, contrast) if diameter < SMALL_DISC_PX and contrast < FAINT_CONTRAST_REL else None
+
+
+def short_doubts(fit: ApertureFit, metrics: dict[str, float | None]) -> list[str]:
+    """The doubts of :func:`judge` in a few words each, most telling first (for the verdict's first sentence)."""
+    words = []
+    if fit.close_runner_up:
+        words.append(f"{article(fit.runner_up.family.aperture.display_name)} fits almost as well")
+    fitted = len(fit.disc_fits)
+    if fitted < MIN_SURE_DISCS:
+        words.append(f"only {fitted} disc{' is' if fitted == 1 else 's are'} clean enough")
+    if fit.outline_misfit > REGULAR_OUTLINE_MISFIT:
+        words.append("the discs' outlines are irregular")
+    iou = metrics.get("iou")
+    if iou is not None and iou < MIN_SURE_IOU:
+        words.append("the discs match it only loosely")
+    if _small_and_faint(fit):
+        words.append("the discs are small and faint")
+    if fit.notes:
+        words.append("a better-fitting shape was set aside (see the notes)")
+    return words
