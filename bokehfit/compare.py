@@ -20,7 +20,7 @@ import numpy as np
 from skimage import measure
 
 from bokehfit.comparison import Comparison
-from bokehfit.discs import COMPARE_MIN_DIAMETER_PX, find_discs, measure_discs_at
+from bokehfit.discs import COMPARE_MIN_DIAMETER_PX, DiscSearch, find_discs, measure_discs_at
 from bokehfit.discs.labels import DiscLabels, read_labels
 from bokehfit.errors import InputError
 from bokehfit.fit import ApertureFit, FitOptions, fit_aperture
@@ -160,14 +160,7 @@ def compare_photo(
     )
     timing["load"] = time.perf_counter() - start
     notify("detect")
-    if discs is None:
-        search = find_discs(photo.luminance, photo.clipped, min_diameter_px=min_diameter_px,
-                            max_diameter_px=max_diameter_px)
-    else:
-        labels = discs if isinstance(discs, DiscLabels) else read_labels(discs)
-        _check_labels_photo(labels, photo)
-        search = measure_discs_at(photo.luminance, photo.clipped,
-                                  [(disc.center_xy, disc.diameter_px) for disc in labels.usable])
+    search = _detect(photo, discs, min_diameter_px, max_diameter_px)
     timing["detect"] = search.time_s
     notify("fit")
     fit = fit_aperture(photo.luminance, search.discs, shapes=shapes, focus_side=focus_side, options=fit_options,
@@ -181,33 +174,57 @@ def compare_photo(
     if fit:
         fstop = estimate_fstop(fit, photo, geometry, lens_model, size_convention, focus_side)
         notify("render")
-        aperture = fit.aperture
-        # The reported aperture as the discs show it: the consensus angle (turned back for near discs).
-        seen_angle = fit.seen_angle_deg or 0.0
-        scale = fit.diameter_px * math.sqrt(math.pi) / 2.0
-        size = 2 * math.ceil(aperture.extent() * scale) + 9
-        kernel = compute_kernel(
-            fit.seen_aperture,
-            diameter_px=fit.diameter_px,
-            size=size,
-            method=AUTO,
-            tolerance=KERNEL_TOLERANCE,
-            adapter=adapter,
-        )
+        kernel = _matched_kernel(fit, adapter)
         timing["render"] = kernel.time_s + kernel.setup_s
-        adapter, _, backend = (kernel.device or "").rpartition(" (")
-        device = {"adapter": adapter or None, "backend": backend.rstrip(")") or None}
+        device = _device(kernel)
         notify("metrics")
         started = time.perf_counter()
-        per_disc = disc_metrics(fit, _kernel_outline(kernel))
-        for name in METRICS:
-            metrics[name] = float(np.median([values[name] for values in per_disc.values()]))
+        per_disc, metrics = _matched_metrics(fit, kernel)
         timing["metrics"] = time.perf_counter() - started
     timing["total"] = time.perf_counter() - start
     comparison = Comparison(photo, search, fit, kernel, geometry, fstop, per_disc, metrics, timing, device)
     if fit:
         comparison.doubts, comparison.rejection = judge(fit, metrics)
     return comparison
+
+
+def _detect(photo: Photo, discs: str | os.PathLike | DiscLabels | None, min_diameter_px: float,
+            max_diameter_px: float) -> DiscSearch:
+    """The photo's discs: found by the search, or (given a discs file) measured afresh at its usable discs' places."""
+    if discs is None:
+        return find_discs(photo.luminance, photo.clipped, min_diameter_px=min_diameter_px,
+                          max_diameter_px=max_diameter_px)
+    labels = discs if isinstance(discs, DiscLabels) else read_labels(discs)
+    _check_labels_photo(labels, photo)
+    return measure_discs_at(photo.luminance, photo.clipped,
+                            [(disc.center_xy, disc.diameter_px) for disc in labels.usable])
+
+
+def _matched_kernel(fit: ApertureFit, adapter: AdapterChoice | None) -> Kernel:
+    """The kernel of the reported aperture as the discs show it: the consensus angle (turned back for
+    near discs), drawn by the cheapest method that meets :data:`KERNEL_TOLERANCE`."""
+    scale = fit.diameter_px * math.sqrt(math.pi) / 2.0
+    size = 2 * math.ceil(fit.aperture.extent() * scale) + 9
+    return compute_kernel(
+        fit.seen_aperture,
+        diameter_px=fit.diameter_px,
+        size=size,
+        method=AUTO,
+        tolerance=KERNEL_TOLERANCE,
+        adapter=adapter,
+    )
+
+
+def _matched_metrics(fit: ApertureFit, kernel: Kernel) -> tuple[dict[int, dict[str, float]], dict[str, float | None]]:
+    """Every metric between each fitted disc and the matched kernel, and each one's median over the discs."""
+    per_disc = disc_metrics(fit, _kernel_outline(kernel))
+    return per_disc, {name: float(np.median([values[name] for values in per_disc.values()])) for name in METRICS}
+
+
+def _device(kernel: Kernel) -> dict[str, str | None]:
+    """The adapter and backend that drew the kernel (both None on the CPU), from its "adapter (backend)"."""
+    adapter, _, backend = (kernel.device or "").rpartition(" (")
+    return {"adapter": adapter or None, "backend": backend.rstrip(")") or None}
 
 
 def _check_labels_photo(labels: DiscLabels, photo: Photo) -> None:
