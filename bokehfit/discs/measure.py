@@ -262,6 +262,67 @@ class Measurement:
     own_step: bool = False
 
 
+@dataclass(frozen=True)
+class Window:
+    """A search window of the photo: rows ``r0`` to ``r1`` − 1, columns ``c0`` to ``c1`` − 1."""
+
+    r0: int
+    c0: int
+    r1: int
+    c1: int
+
+    @classmethod
+    def around(cls, shape: tuple[int, int], center_xy: tuple[float, float], half: int) -> Window:
+        """The window of ``half`` pixels each side of the pixel at ``center_xy``, within a frame of ``shape``."""
+        height, width = shape
+        col, row = int(round(center_xy[0])), int(round(center_xy[1]))
+        return cls(max(0, row - half), max(0, col - half), min(height, row + half + 1), min(width, col + half + 1))
+
+    def of(self, image: np.ndarray) -> np.ndarray:
+        """The window's pixels of ``image`` (a view)."""
+        return image[self.r0 : self.r1, self.c0 : self.c1]
+
+    def distance(self, center_xy: tuple[float, float]) -> np.ndarray:
+        """Distance of each of the window's pixels from ``center_xy`` (photo coordinates)."""
+        rows, cols = np.ogrid[self.r0 - center_xy[1] : self.r1 - center_xy[1], self.c0 - center_xy[0] : self.c1 - center_xy[0]]
+        return np.sqrt(rows * rows + cols * cols)
+
+
+@dataclass(frozen=True)
+class Surround:
+    """The levels of a candidate's surround (the annulus of the module's Notes)."""
+
+    plane: _Plane | None  #: the background's gradient across the window, or None (a flat background)
+    background: float  #: median of the annulus, less the plane
+    noise: float  #: its scaled median absolute deviation
+    lift: float  #: its median less its 10th percentile (other light in part of the surround)
+
+
+@dataclass(frozen=True)
+class Levels:
+    """The levels a disc's outline was drawn with (the module's Notes); the outline lies halfway
+    between ``background`` and ``plateau``."""
+
+    background: float
+    plateau: float
+    noise: float
+    ring_lift: float  #: the surround's lift (:attr:`Surround.lift`)
+
+
+@dataclass(frozen=True)
+class Outlined:
+    """A closed outline around a candidate, with what it was drawn from: what :func:`describe` judges."""
+
+    window: Window  #: where ``crop`` lies in the photo
+    crop: np.ndarray  #: the pixels the outline was drawn on: the window's, less the background plane if any
+    levels: Levels
+    outline: np.ndarray  #: (N, 2) closed sub-pixel outline in the crop, (x, y) = (column, row)
+    merged: bool  #: cut out of a larger bright region by a circle
+    #: Pixels raised to the plateau before the outline was drawn (a bridged occluder, a ring's closed
+    #: gaps): the outline next to them is not the disc's own; None where there are none.
+    bridged: np.ndarray | None
+    on_cut: np.ndarray  #: per outline point: on the cutting circle, or otherwise not the disc's own edge
+
 
 def _median(values: np.ndarray):
     """``np.median`` of a 1-D array without NaN, the same number in the array's type, without
@@ -325,9 +386,10 @@ def _background_plane(crop: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> _
     return _Plane(float(coefficients[1]), float(coefficients[2]), float(_median(design[:, 1:] @ coefficients[1:])))
 
 
-def _annulus_levels(crop: np.ndarray, distance: np.ndarray, radius: float):
-    """The plane of the surround's gradient (or None), and the median, robust spread and
-    lift (median − 10th percentile) of the annulus 1.3 r … 1.7 r (+ 2 px) less that plane.
+def _annulus_levels(crop: np.ndarray, distance: np.ndarray, radius: float) -> Surround | None:
+    """The :class:`Surround`: the plane of the surround's gradient (or None), and the median, robust
+    spread and lift (median − 10th percentile) of the annulus 1.3 r … 1.7 r (+ 2 px) less that plane;
+    None where the window holds no surround.
 
     The background model at the disc's scale is a plane fitted to the annulus: a
     smooth gradient across a large disc's surround (haze, vignetting) can exceed
@@ -350,7 +412,7 @@ def _annulus_levels(crop: np.ndarray, distance: np.ndarray, radius: float):
     ring = crop[rows, cols] if plane is None else crop[rows, cols] - plane.at(rows, cols)
     median = float(_median(ring))
     low = float(_percentile(ring, 10))
-    return plane, (median, 1.4826 * float(_median(np.abs(ring - median))), median - low)
+    return Surround(plane, median, 1.4826 * float(_median(np.abs(ring - median))), median - low)
 
 
 def _levelled(crop: np.ndarray, where: np.ndarray, plane: _Plane | None) -> np.ndarray:
@@ -445,15 +507,6 @@ def polygon_area_centroid(xy: np.ndarray) -> tuple[float, float, float]:
     cx = ((x + x1) * cross).sum() / (6.0 * area)
     cy = ((y + y1) * cross).sum() / (6.0 * area)
     return abs(area), float(cx), float(cy)
-
-
-def _window(luminance: np.ndarray, center_xy: tuple[float, float], half: int):
-    height, width = luminance.shape
-    col, row = int(round(center_xy[0])), int(round(center_xy[1]))
-    r0, c0 = max(0, row - half), max(0, col - half)
-    r1, c1 = min(height, row + half + 1), min(width, col + half + 1)
-    rows, cols = np.ogrid[r0 - center_xy[1] : r1 - center_xy[1], c0 - center_xy[0] : c1 - center_xy[0]]
-    return (r0, c0, r1, c1), np.sqrt(rows * rows + cols * cols)
 
 
 def _bridge_occluders(crop, distance, level, plateau, radius):
@@ -590,24 +643,23 @@ def _closed_outline(luminance, center_xy, radius, reach, core_rel=0.8, percentil
     """Levels and the closed 50 % outline around ``center_xy``, growing the window
     while the outline runs into it; the last window masks beyond ``reach`` instead
     (the disc then touches a neighbour). The plateau is the ``percentile`` within
-    ``core_rel`` · r. Returns (window, crop, levels, outline, merged, unseen_pixels,
-    on_cut): the pixels whose outline is not the disc's own (bridged occluders) or
-    None, and per outline point whether it lies on the cutting circle. ``levelled`` keeps the
-    levels of each window (a dict kept by the caller for one candidate)."""
+    ``core_rel`` · r. Returns the :class:`Outlined`, or why there is none. ``levelled`` keeps the
+    :class:`Surround` of each window (a dict kept by the caller for one candidate)."""
     height, width = luminance.shape
     levelled = {} if levelled is None else levelled
     large = max(1.7 * radius + 4.0, reach) >= LARGE_DISC_PX
     for grow in WINDOW_GROWTH[:2] if large else WINDOW_GROWTH:
         half = int(math.ceil(grow * max(1.7 * radius + 4.0, reach)))
-        window, distance = _window(luminance, center_xy, half)
-        r0, c0, r1, c1 = window
-        crop = luminance[r0:r1, c0:c1]
+        window = Window.around(luminance.shape, center_xy, half)
+        distance = window.distance(center_xy)
+        crop = window.of(luminance)
         key = (center_xy, radius, half)
         if key not in levelled:  # the ring mode's second plateau percentile has the same window
             levelled[key] = _annulus_levels(crop, distance, radius)
         if levelled[key] is None:
             return "no surround"
-        plane, (background, noise, ring_lift) = levelled[key]
+        surround = levelled[key]
+        plane, background, noise, ring_lift = surround.plane, surround.background, surround.noise, surround.lift
         core = _levelled(crop, distance <= max(core_rel * radius, 0.75), plane)
         plateau = float(_percentile(core, percentile)) if core.size else background
         plateau = background + edge_rel * (plateau - background)  # a bright centre's: the top of its edge
@@ -616,7 +668,7 @@ def _closed_outline(luminance, center_xy, radius, reach, core_rel=0.8, percentil
             return "faint"
         if plane is not None:
             crop = crop - plane.over(crop.shape)
-        seed_rc = (center_xy[1] - r0, center_xy[0] - c0)
+        seed_rc = (center_xy[1] - window.r0, center_xy[0] - window.c0)
         if core_rel == RING_CORE_REL:
             bridged_crop, bridged = _close_ring(crop, distance, level, plateau, radius)
         else:
@@ -625,13 +677,12 @@ def _closed_outline(luminance, center_xy, radius, reach, core_rel=0.8, percentil
         if outline is None and core_rel == RING_CORE_REL:
             arc = _ring_arc(crop, level, seed_rc, radius)
             if arc is not None:  # a rim that breaks: its arcs, and the circle through them
-                levels = (background, plateau, noise, ring_lift)
-                return window, crop, levels, arc[0], False, None, ~arc[1]
+                return Outlined(window, crop, Levels(background, plateau, noise, ring_lift), arc[0], False, None, ~arc[1])
         if outline is None:
             return "no outline"
         if not _open_in_window(outline, crop.shape, window, (height, width)):
-            levels = (background, plateau, noise, ring_lift)
-            return window, crop, levels, outline, False, bridged, np.zeros(len(outline), dtype=bool)
+            levels = Levels(background, plateau, noise, ring_lift)
+            return Outlined(window, crop, levels, outline, False, bridged, np.zeros(len(outline), dtype=bool))
     # Still open: part of a larger bright structure, or discs run together. Cut
     # the disc out of it with a circle through its neighbours' gap.
     masked = np.where(distance <= reach, crop, min(background, level - 1e-6)).astype(np.float32)
@@ -641,7 +692,7 @@ def _closed_outline(luminance, center_xy, radius, reach, core_rel=0.8, percentil
     on_cut = np.abs(np.hypot(outline[:, 0] - seed_rc[1], outline[:, 1] - seed_rc[0]) - reach) < 1.0
     if on_cut.mean() > MAX_CUT_SHARE:  # mostly the cutting circle: a piece of something larger
         return "part of a larger region"
-    return window, crop, (background, plateau, noise, ring_lift), outline, True, None, on_cut
+    return Outlined(window, crop, Levels(background, plateau, noise, ring_lift), outline, True, None, on_cut)
 
 
 def _quieted(crop: np.ndarray, contrast: float, noise: float, radius: float) -> np.ndarray:
@@ -731,10 +782,10 @@ def measure_candidate(
     if measured.reason == "soft edge":
         step = _step_share(found)
         if step is not None:  # a bright centre: measured again with the top of its edge as the plateau
-            (r0, c0, _, _), _, _, outline, _, _, _ = found
+            outline = found.outline
             _, cx, cy = polygon_area_centroid(outline)
             reach = float(np.max(np.hypot(outline[:, 0] - cx, outline[:, 1] - cy)))
-            again = _two_passes(luminance, (cx + c0, cy + r0), reach, reach, 0.8, 90, levelled, 2.0 * step)
+            again = _two_passes(luminance, (cx + found.window.c0, cy + found.window.r0), reach, reach, 0.8, 90, levelled, 2.0 * step)
             if not isinstance(again, str):
                 stepped = describe(luminance, clipped_mask, again, min_noise, min_diameter_px)
                 if stepped.reason is None and stepped.diameter_px > measured.diameter_px:
@@ -742,7 +793,7 @@ def measure_candidate(
     return measured
 
 
-def _step_share(found) -> float | None:
+def _step_share(found: Outlined) -> float | None:
     """The share of the contrast at the middle of a bright-centre disc's edge, or None.
 
     ``found`` is a closed outline whose edge is soft; the iso-contours at
@@ -750,7 +801,8 @@ def _step_share(found) -> float | None:
     gradient (module constants). None where no level is markedly steeper low down:
     no step, so no disc's edge.
     """
-    _, crop, (background, plateau, _, _), outline, _, _, _ = found
+    crop, outline = found.crop, found.outline
+    background, plateau = found.levels.background, found.levels.plateau
     contrast = plateau - background
     _, cx, cy = polygon_area_centroid(outline)
     steepness = []
@@ -773,20 +825,21 @@ def outline_diameter(image: np.ndarray, center_xy: tuple[float, float], diameter
     For measures of a disc already found, in another image of the same scene: the colour channels.
     """
     radius = max(1.0, 0.5 * diameter_px)
-    window, distance = _window(image, center_xy, int(math.ceil(1.7 * radius + 4.0)))
-    r0, c0, r1, c1 = window
-    crop = image[r0:r1, c0:c1]
-    levels = _annulus_levels(crop, distance, radius)
-    if levels is None:
+    window = Window.around(image.shape, center_xy, int(math.ceil(1.7 * radius + 4.0)))
+    distance = window.distance(center_xy)
+    crop = window.of(image)
+    surround = _annulus_levels(crop, distance, radius)
+    if surround is None:
         return None
-    plane, (background, noise, _) = levels
+    plane, background, noise = surround.plane, surround.background, surround.noise
     core = _levelled(crop, distance <= max(0.8 * radius, 0.75), plane)
     plateau = float(_percentile(core, 90)) if core.size else background
     if not plateau - background >= MIN_SNR * noise or plateau <= background:
         return None
     if plane is not None:
         crop = crop - plane.over(crop.shape)
-    outline = _outline(crop, background + 0.5 * (plateau - background), background, (center_xy[1] - r0, center_xy[0] - c0))
+    seed_rc = (center_xy[1] - window.r0, center_xy[0] - window.c0)
+    outline = _outline(crop, background + 0.5 * (plateau - background), background, seed_rc)
     if outline is None or _open_in_window(outline, crop.shape, window, image.shape):
         return None
     return 2.0 * math.sqrt(polygon_area_centroid(outline)[0] / math.pi)
@@ -799,19 +852,21 @@ def _two_passes(luminance, center_xy, radius, reach, core_rel, percentile=90, le
         found = _closed_outline(luminance, center_xy, radius, 1.3 * reach + 2.0, core_rel, percentile, levelled, edge_rel)
         if isinstance(found, str):
             return found
-        (r0, c0, _, _), _, _, outline, merged, _, _ = found
+        outline = found.outline
         area, cx, cy = polygon_area_centroid(outline)
-        if merged or area <= 0:
+        if found.merged or area <= 0:
             break
-        center_xy, radius = (cx + c0, cy + r0), max(1.0, math.sqrt(area / math.pi))
+        center_xy, radius = (cx + found.window.c0, cy + found.window.r0), max(1.0, math.sqrt(area / math.pi))
         reach = float(np.max(np.hypot(outline[:, 0] - cx, outline[:, 1] - cy)))
     return found
 
 
-def describe(luminance, clipped_mask, found, min_noise, min_diameter_px) -> Measurement:
+def describe(luminance, clipped_mask, found: Outlined, min_noise, min_diameter_px) -> Measurement:
     """The :class:`Measurement` of a closed outline: size, shape, flags, what is seen, and the verdict."""
     height, width = luminance.shape
-    (r0, c0, r1, c1), crop, (background, plateau, noise, ring_lift), outline, merged, bridged, on_cut = found
+    r0, c0, r1, c1 = found.window.r0, found.window.c0, found.window.r1, found.window.c1
+    crop, outline, merged, bridged, on_cut = found.crop, found.outline, found.merged, found.bridged, found.on_cut
+    background, plateau, noise, ring_lift = found.levels.background, found.levels.plateau, found.levels.noise, found.levels.ring_lift
     contrast = plateau - background
     area, cx, cy = polygon_area_centroid(outline)
     diameter = 2.0 * math.sqrt(area / math.pi)
@@ -897,9 +952,9 @@ def _window_distance(shape: tuple[int, int], cx: float, cy: float) -> np.ndarray
     return np.hypot(cols - cx, rows - cy)
 
 
-def _open_in_window(outline: np.ndarray, shape: tuple[int, int], window, frame) -> bool:
+def _open_in_window(outline: np.ndarray, shape: tuple[int, int], window: Window, frame) -> bool:
     """True when the outline reaches a side of the search window that is not the frame's edge."""
-    r0, c0, r1, c1 = window
+    r0, c0, r1, c1 = window.r0, window.c0, window.r1, window.c1
     height, width = frame
     x, y = outline[:, 0], outline[:, 1]
     return bool(

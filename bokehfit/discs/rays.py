@@ -47,7 +47,7 @@ import cv2
 import numpy as np
 from scipy import ndimage
 
-from bokehfit.discs.measure import Measurement, describe, polygon_area_centroid
+from bokehfit.discs.measure import Levels, Measurement, Outlined, Window, describe, polygon_area_centroid
 
 __all__ = ["measure_rays", "pixel_noise", "RAYS", "MIN_STEP_SIGMA", "MIN_SEEN"]
 
@@ -301,7 +301,7 @@ def _trace(crop, centre_rc, radius, noise):
     # The disc's contrast, for its tests (the edge's width among them): its plateau over the ground, not
     # the step's two sides alone (a glow's local step is as steep as a disc's; its rise inwards is not).
     contrast = float(np.median([rays.plateau(k, at[k]) - outer[k] for k in np.nonzero(on)[0]]))
-    return outline, on, (background, background + max(contrast, typical), noise, lift)
+    return outline, on, Levels(background, background + max(contrast, typical), noise, lift)
 
 
 def measure_rays(
@@ -337,7 +337,7 @@ def measure_rays(
         if isinstance(traced, str):
             return traced
         outline, seen, levels = traced
-        found = ((r0, c0, r1, c1), crop, levels, outline, False, None, ~seen)
+        found = Outlined(Window(r0, c0, r1, c1), crop, levels, outline, False, None, ~seen)
         area, cx, cy = polygon_area_centroid(outline)
         if area <= 0:
             return "no outline"
