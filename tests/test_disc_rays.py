@@ -179,3 +179,33 @@ def test_the_search_finds_no_disc_in_a_glow(kind):
     glow = np.exp(-0.5 * (distance / 40.0) ** 2) if kind == "gaussian" else np.clip(1 - distance / 90.0, 0, None)
     image = (0.1 + 0.3 * glow + np.random.default_rng(1).normal(0, 0.003, glow.shape)).astype(np.float32)
     assert not [d for d in find_discs(image, None, min_diameter_px=8).discs if d.usable]
+
+
+
+def _bright_centre_disc(shape, centre, radius, seed):
+    """A disc whose light falls from a bright core (0.87, over 0.3 of its radius) along a smooth
+    shoulder to 0.4 at its edge, where it steps down to the ground (0.05), as the discs of bright lamps
+    do in a JPEG: drawn by geometry, the edge blurred by 1.2 px, white noise."""
+    yy, xx = np.mgrid[0:shape[0], 0:shape[1]]
+    fall = np.clip((np.hypot(xx - centre[0], yy - centre[1]) - 0.3 * radius) / (0.7 * radius), 0, 1)
+    shoulder = 0.4 + 0.47 * 0.5 * (1 + np.cos(math.pi * fall))
+    light = ndimage.gaussian_filter((shoulder * _indicator(shape, _circle(centre, 2 * radius))).astype(np.float32), 1.2)
+    return (0.05 + light + np.random.default_rng(seed).normal(0.0, 0.004, shape)).astype(np.float32)
+
+
+@pytest.mark.parametrize("radius,seed", [(12.0, 1), (12.0, 2), (13.0, 3)])
+def test_the_search_measures_a_bright_centre_blob_by_its_step(radius, seed, monkeypatch):
+    """The blob's half-peak region is its core; one level between its peak and the ground runs along the
+    shoulder, whose fall is as wide as the disc ("soft edge"), and the contour finds no disc. The disc's
+    own step at its edge is sharp: measured along rays, the blob is the disc at its edge."""
+    import bokehfit.discs as discs
+
+    shape, centre = (160, 160), (80.3, 79.6)
+    image = _bright_centre_disc(shape, centre, radius, seed)
+    monkeypatch.setattr(discs, "BLOB_RAYS_MIN_DIAMETER_PX", math.inf)
+    assert not [d for d in discs.find_discs(image, None, min_diameter_px=8).discs if d.usable]  # the contour alone
+    monkeypatch.undo()
+    usable = [d for d in discs.find_discs(image, None, min_diameter_px=8).discs if d.usable]
+    assert len(usable) == 1, [(d.center_xy, d.diameter_px) for d in usable]
+    assert abs(usable[0].diameter_px / (2 * radius) - 1) < 0.08, usable[0].diameter_px
+    assert math.hypot(usable[0].center_xy[0] - centre[0], usable[0].center_xy[1] - centre[1]) < 1.0

@@ -81,8 +81,10 @@ def test_04_juniper_ring_discs_on_the_sprig(found):
 
 def test_05_backlit_grass_is_a_weak_case(found):
     photo, search = found("05_backlit-grass_unsplash-522b53fb137bb.jpg")
-    # Clipped sun and in-focus glints: almost nothing here is a clean plateau.
-    assert sum(d.usable and d.evidence == "plateau" for d in search.discs) <= 10
+    # Clipped sun and in-focus glints: almost nothing here is a clean plateau. 9 before blobs were also
+    # measured by their step along rays, 11 since: the two more are faint blobs of the background's
+    # bokeh, outside the boxes where the person's labels are complete.
+    assert sum(d.usable and d.evidence == "plateau" for d in search.discs) <= 12
 
 
 def test_06_saturated_string_lights_are_kept_as_outline_evidence(found):

@@ -90,6 +90,15 @@ RAYS_AFTER = ("faint",)
 #: ... and from this size (px): the step's sides are then 5 px or more (under 64 px, at their 3-px floor,
 #: JPEG's 8-px blocks and texture make steps as clear as a small faint disc's).
 RAYS_MIN_DIAMETER_PX = 64.0
+#: A blob (light above its surround) whose contour the measurement draws but calls faint or soft-edged
+#: is measured again by its own step along rays: a bright-centre disc, or one over its own glow or its
+#: neighbours' light, has a step at its edge that no one level between its peak and its surround
+#: follows. Not where the contour draws no outline: there the rays' closed path took broad glows for
+#: discs (the reference photos' labels: two glows of 350 px used by the fit, one photo's answer wrong).
+#: Unlike a circle through edges, a blob is light standing out of its surround, so its step is sought from ...
+BLOB_RAYS_AFTER = ("faint", "soft edge")
+#: ... this size (px): the step's sides (3 px, beginning 1.5 px from the edge) then lie inside the disc.
+BLOB_RAYS_MIN_DIAMETER_PX = 2.0 * RESOLVABLE_PX
 #: Most circles through edges measured per photo (module bokehfit.discs.circles; the clearest first).
 MAX_CIRCLES = MAX_CANDIDATES // 10
 #: A disc whose reliable share of the outline reaches this is seen whole (a stray point or two
@@ -445,6 +454,9 @@ def find_discs(
                     rejections.append(Rejection(candidate.center_xy, candidate.diameter_px, "not a cluster"))
                 continue
             m = measure_candidate(*args, min_diameter_px)
+            if isinstance(m, Measurement) and candidate.diameter_px >= BLOB_RAYS_MIN_DIAMETER_PX:
+                m = _by_rays_after(luminance, clipped, m, candidate.center_xy, candidate.diameter_px,
+                                   min_diameter_px, BLOB_RAYS_AFTER)
             if isinstance(m, str):
                 reason = m
             else:
@@ -545,12 +557,20 @@ def _measure_place(luminance, clipped, xy, diameter: float, min_diameter_px: flo
     if not (0 <= xy[0] < width and 0 <= xy[1] < height):
         return "outside the photo"
     m = _contour_at_place(luminance, clipped, xy, diameter, min_diameter_px)
+    return _by_rays_after(luminance, clipped, m, xy, diameter, min_diameter_px, rays_after)
+
+
+def _by_rays_after(luminance, clipped, m: Measurement | str, xy, diameter: float, min_diameter_px: float,
+                   rays_after: tuple[str, ...] | None) -> Measurement | str:
+    """The contour's measurement ``m`` at a place, or, where it finds no disc there for one of the reasons
+    ``rays_after`` (any reason: None), the disc measured there by its own step along rays, where that
+    finds a disc of about ``diameter`` at the place (a measurement that draws an outline, over a reason)."""
     if isinstance(m, Measurement) and m.reason is None:
         return m
     if rays_after is not None and (m if isinstance(m, str) else m.reason) not in rays_after:
         return m
     # Where one level does not outline it (a faint disc over haze and its neighbours' light, discs
-    # that overlap), the disc's own edge along rays from the place may.
+    # that overlap, a bright centre), the disc's own edge along rays from the place may.
     stepped = measure_rays(luminance, clipped, xy, diameter, MIN_NOISE, min_diameter_px)
     if isinstance(stepped, Measurement) and _near_place(stepped, xy, diameter) and \
             (stepped.reason is None or isinstance(m, str)):
