@@ -345,7 +345,7 @@ def test_strips_opened_again_give_the_same_candidates(monkeypatch, keep_below, m
 
 
 def test_fast_median_and_percentile_are_numpys():
-    from bokehfit.discs.measure import _median, _percentile
+    from bokehfit.discs.levels import _median, _percentile
 
     rng = np.random.default_rng(11)
     for trial in range(2000):
@@ -363,7 +363,7 @@ def test_fast_median_and_percentile_are_numpys():
 def test_hole_filling_is_scipys():
     from scipy import ndimage
 
-    from bokehfit.discs.measure import _fill_holes
+    from bokehfit.discs.gaps import _fill_holes
 
     rng = np.random.default_rng(12)
     for _ in range(500):
@@ -376,7 +376,7 @@ def test_outline_is_the_largest_contour_around_the_seed():
     tracing every region of the crop and keeping the largest one around the seed gives."""
     from skimage import measure
 
-    from bokehfit.discs.measure import _outline
+    from bokehfit.discs.contours import _outline
 
     def every_contour(crop, level, background, seed_rc):
         padded = np.pad(crop, 1, mode="constant", constant_values=min(background, level - 1e-6))
@@ -416,7 +416,7 @@ def test_outline_points_near_a_mask_are_those_of_the_whole_crop():
     verdict is the one the transform of the whole crop gives."""
     from scipy import ndimage
 
-    from bokehfit.discs.measure import UNSEEN_MARGIN_PX, _near
+    from bokehfit.discs.verdict import UNSEEN_MARGIN_PX, _near
 
     rng = np.random.default_rng(14)
     near_some = 0

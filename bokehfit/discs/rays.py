@@ -47,7 +47,10 @@ import cv2
 import numpy as np
 from scipy import ndimage
 
-from bokehfit.discs.measure import Levels, Measurement, Outlined, Window, describe, polygon_area_centroid
+from bokehfit.discs.contours import polygon_area_centroid
+from bokehfit.discs.levels import Levels, Window
+from bokehfit.discs.outlines import Outlined
+from bokehfit.discs.verdict import Measurement, describe
 
 __all__ = ["measure_rays", "pixel_noise", "RAYS", "MIN_STEP_SIGMA", "MIN_SEEN"]
 

@@ -1,0 +1,240 @@
+"""Judge a closed outline: the disc's size, centre and shape, which of its outline is its own,
+its flags, and whether it is a disc (a :class:`Measurement`).
+
+Notes
+-----
+A candidate is kept as a disc when all of these hold (the rejection reasons;
+those of a candidate that has no outline are :mod:`bokehfit.discs.outlines`'s):
+
+``too small``       equal-area diameter below the minimum (default 4 px);
+``faint``           plateau contrast ``p − b`` below ``MIN_SNR`` local noise levels,
+                    below ``MIN_CONTRAST_ABS`` (linear) or below
+                    ``MIN_CONTRAST_REL`` of the background;
+``soft edge``       the edge is wide for the size: the edge width, contrast over
+                    the median gradient along the outline, exceeds
+                    ``max(EDGE_WIDTH_MIN_PX, EDGE_WIDTH_MAX_REL · r)``. A flat disc
+                    blurred by b px has 2.5 b; an in-focus glint or a smooth
+                    blob (Gaussian: 1.44 r) much more. Measured on the outline,
+                    it is not fooled by neighbouring discs;
+``not compact``     solidity (area over convex-hull area) below ``MIN_SOLIDITY``
+                    (the star has 0.68): edges, branches, texture;
+``in a clipped region``  saturated, and the clipping goes on past its outline
+                    (more than ``MAX_CLIPPED_RING_SHARE`` of a 2-px ring);
+``elongated``       the minimum-area rectangle's sides differ by more than
+                    ``MAX_ELONGATION`` (a slit of aspect 0.26 still passes);
+``line-like``       the widest circle inside the blob has a radius below
+                    ``MIN_THICKNESS_REL`` of the equal-area radius: a thin streak,
+                    straight or curved (a glint on water, a lit stem), which a
+                    minimum-area rectangle does not call elongated when it bends.
+
+What a kept disc offers (for the fit that comes later):
+
+- **Saturated discs** keep their outline: the 50 % level lies between the
+  background and the clipped plateau, where the disc meets the background,
+  so the clipping moves it little. ``clipped_share`` is the share of the disc's
+  area clipped in the source. Outline points whose outside (2 px out) is
+  clipped too are not reliable: bloom joins the disc to other clipped light.
+- **Its own outline**: the points beyond the frame, on a cutting circle or within
+  ``UNSEEN_MARGIN_PX`` of bridged pixels (:mod:`bokehfit.discs.gaps`) are marked not
+  seen (``outline_reliable``).
+- **Ring discs**: a disc is flagged ``ring`` when the
+  median of its centre (within ``RING_CENTRE_REL`` of the radius) lies below the
+  plateau by more than ``RING_DIP`` of the contrast.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from scipy import ndimage
+
+from bokehfit.discs.contours import _deep_concavities, _edge_gradient, polygon_area_centroid
+from bokehfit.discs.levels import _contrast_ok, _median
+from bokehfit.discs.outlines import EDGE_WIDTH_MIN_PX, Outlined
+
+__all__ = ["Measurement", "describe", "MIN_SOLIDITY", "MAX_ELONGATION", "MIN_THICKNESS_REL", "RING_DIP"]
+
+#: The star, the least compact aperture, has solidity 0.68.
+MIN_SOLIDITY = 0.6
+#: A concavity deeper than this share of the equal-area radius (and than
+#: OVERLAP_DEFECT_MIN_PX) marks overlapping discs when there are 2 to 4 of them:
+#: two discs make two; the star's five are its own; outline noise stays below 0.2 px.
+OVERLAP_DEFECT_DEPTH = 0.04
+OVERLAP_DEFECT_MIN_PX = 1.0
+#: A disc whose surrounding ring has its median above its 10th percentile by
+#: more than this share of the disc's contrast sits on other light (most of its
+#: surround is another disc) and is flagged ``overlaps``.
+MAX_RING_LIFT = 0.5
+MAX_ELONGATION = 15.0
+EDGE_WIDTH_MAX_REL = 0.6
+#: Share of a disc's pixels that may be clipped in the source before it counts as saturated.
+SATURATED_SHARE = 0.002
+#: A saturated "disc" whose surrounding ring is clipped beyond this share is a
+#: piece of a larger clipped region (the sun, a window), not a disc.
+MAX_CLIPPED_RING_SHARE = 0.3
+#: Line-like: the largest inscribed circle's radius over the equal-area radius. A disc has
+#: about 1, the slit of aspect 0.3 (the thinnest aperture) 0.27, a rectangle of sides 1:a
+#: 0.886/√a, so 0.2 refuses streaks longer than about 20 times their width.
+MIN_THICKNESS_REL = 0.2
+#: Outline points within this distance (px) of bridged or cut-off pixels are not seen.
+UNSEEN_MARGIN_PX = 1.5
+#: A disc is a ring when its centre lies below the rim by this share of the contrast.
+RING_DIP = 0.25
+#: The centre of a disc, for the ring test: this share of its equal-area radius; its rim, this
+#: band (the blurred edge beyond it would make every disc look darker at the rim, not brighter).
+RING_CENTRE_REL = 0.5
+RING_RIM_REL = (0.7, 0.95)
+
+
+@dataclass(frozen=True)
+class Measurement:
+    """A measured blob; ``reason`` is None for a disc, else why it was rejected."""
+
+    center_xy: tuple[float, float]
+    diameter_px: float
+    area_px: float
+    outline_xy: np.ndarray  #: (N, 2) closed sub-pixel outline, (x, y) = (column, row)
+    plateau: float
+    background: float
+    snr: float
+    solidity: float
+    elongation: float
+    edge_width_px: float
+    saturated: bool
+    clipped: bool
+    overlaps: bool  #: cut out of a larger bright region, or shaped like two to four merged discs
+    reason: str | None
+    #: Per outline point: True where the outline is the disc's own edge and reliable (not the
+    #: frame, a cutting circle, an occluder or clipped bloom).
+    outline_reliable: np.ndarray | None = None
+    clipped_share: float = 0.0  #: share of the disc's area clipped in the source
+    ring: bool = False  #: rim brighter than the centre (soap-bubble disc)
+    bright_centre: bool = False  #: centre brighter than the rim, edge a step below it (rim < 0)
+    occluded: bool = False  #: a thin occluder bridged across the disc
+    thickness: float = 1.0  #: largest inscribed radius over the equal-area radius
+    #: The outline was traced along rays as the disc's own step down (:mod:`bokehfit.discs.rays`): light
+    #: adds, so its seen points are the disc's edge inside other discs' light too.
+    own_step: bool = False
+
+
+def describe(luminance, clipped_mask, found: Outlined, min_noise, min_diameter_px) -> Measurement:
+    """The :class:`Measurement` of a closed outline: size, shape, flags, what is seen, and the verdict."""
+    height, width = luminance.shape
+    r0, c0, r1, c1 = found.window.r0, found.window.c0, found.window.r1, found.window.c1
+    crop, outline, merged, bridged, on_cut = found.crop, found.outline, found.merged, found.bridged, found.on_cut
+    background, plateau, noise, ring_lift = found.levels.background, found.levels.plateau, found.levels.noise, found.levels.ring_lift
+    contrast = plateau - background
+    area, cx, cy = polygon_area_centroid(outline)
+    diameter = 2.0 * math.sqrt(area / math.pi)
+    hull_area = float(cv2.contourArea(cv2.convexHull(outline.astype(np.float32))))
+    solidity = area / hull_area if hull_area > 0 else 0.0
+    (_, _), (side_a, side_b), _ = cv2.minAreaRect(outline.astype(np.float32))
+    elongation = max(side_a, side_b) / max(min(side_a, side_b), 1e-6)
+    inside = np.zeros(crop.shape, dtype=np.uint8)
+    cv2.fillPoly(inside, [np.round(outline).astype(np.int32)], 1)
+    blob = inside.astype(bool)
+    # The edge is measured where it is seen: not along a cutting circle or a filled-in arc.
+    edge_points = outline[~on_cut] if (~on_cut).sum() >= 4 else outline
+    edge_width = contrast / max(_edge_gradient(crop, edge_points), 1e-12)
+    outline_xy = outline + np.array([c0, r0], dtype=np.float64)
+    # The padded contour runs outside [0, size − 1] only where the frame cuts the disc.
+    off_frame = (outline_xy[:, 0] < 0.0) | (outline_xy[:, 1] < 0.0)
+    off_frame |= (outline_xy[:, 0] > width - 1) | (outline_xy[:, 1] > height - 1)
+    clipped = bool(off_frame.any())
+    unseen = off_frame | on_cut | _near(bridged, outline, UNSEEN_MARGIN_PX)
+    saturated = clipped_beyond = False
+    clipped_share = 0.0
+    if clipped_mask is not None:
+        clipped_crop = clipped_mask[r0:r1, c0:c1]
+        clipped_share = float(clipped_crop[blob].sum()) / max(float(blob.sum()), 1.0)
+        saturated = int(clipped_crop[blob].sum()) > max(1.0, SATURATED_SHARE * area)
+        if saturated:  # a saturated disc's edge is where the clipping stops
+            ring = cv2.dilate(inside, np.ones((5, 5), np.uint8)).astype(bool) & ~blob
+            clipped_beyond = bool(ring.any()) and clipped_crop[ring].mean() > MAX_CLIPPED_RING_SHARE
+            # Bloom: where the clipping runs on past the outline, that stretch is not the disc's edge.
+            unseen |= _near(ring & clipped_crop, outline, UNSEEN_MARGIN_PX)
+    from_centre = _window_distance(crop.shape, cx, cy) / max(0.5 * diameter, 1e-6)
+    centre, rim = crop[from_centre <= RING_CENTRE_REL], crop[(from_centre >= RING_RIM_REL[0]) & (from_centre <= RING_RIM_REL[1])]
+    is_ring = bool(centre.size and rim.size) and float(_median(rim) - _median(centre)) > RING_DIP * contrast
+    thickness = _thickness(blob, 0.5 * diameter)
+    depth = max(OVERLAP_DEFECT_MIN_PX, OVERLAP_DEFECT_DEPTH * 0.5 * diameter)
+    merged = merged or 2 <= _deep_concavities(outline, depth) <= 4
+    # Most of its surround lifted above the rest by other light: the bright lens
+    # where two discs overlap, or a disc sitting on another one.
+    merged = merged or ring_lift > MAX_RING_LIFT * contrast
+    snr = contrast / max(noise, min_noise)
+
+    reason = None
+    if diameter < min_diameter_px:
+        reason = "too small"
+    elif clipped_beyond:
+        reason = "in a clipped region"
+    elif not _contrast_ok(contrast, noise, background, diameter):
+        reason = "faint"
+    elif edge_width > max(EDGE_WIDTH_MIN_PX, EDGE_WIDTH_MAX_REL * 0.5 * diameter) and not saturated:
+        reason = "soft edge"
+    elif elongation > MAX_ELONGATION:
+        reason = "elongated"
+    elif thickness < MIN_THICKNESS_REL:
+        reason = "line-like"
+    elif solidity < MIN_SOLIDITY:
+        reason = "not compact"
+    return Measurement(
+        center_xy=(cx + c0, cy + r0),
+        diameter_px=diameter,
+        area_px=area,
+        outline_xy=outline_xy,
+        plateau=plateau,
+        background=background,
+        snr=snr,
+        solidity=solidity,
+        elongation=elongation,
+        edge_width_px=edge_width,
+        saturated=saturated,
+        clipped=clipped,
+        overlaps=merged,
+        reason=reason,
+        outline_reliable=~unseen,
+        clipped_share=clipped_share,
+        ring=is_ring,
+        occluded=bridged is not None,
+        thickness=thickness,
+    )
+
+
+def _window_distance(shape: tuple[int, int], cx: float, cy: float) -> np.ndarray:
+    """Distance of every pixel of a crop of ``shape`` from (cx, cy)."""
+    rows, cols = np.ogrid[: shape[0], : shape[1]]
+    return np.hypot(cols - cx, rows - cy)
+
+
+def _near(mask: np.ndarray | None, outline: np.ndarray, margin_px: float) -> np.ndarray:
+    """Per outline point (crop coordinates): True within ``margin_px`` of a pixel of ``mask``.
+
+    The distances are interpolated between the four pixels around each point, which lie within
+    √2 of one another: only distances up to ``margin_px`` + 2√2 decide it, and those of pixels
+    ``pad`` or more inside a box are the same as over the whole crop. So the distance
+    transform is taken over the outline's box and that margin, not the crop."""
+    if mask is None or not mask.any():
+        return np.zeros(len(outline), dtype=bool)
+    height, width = mask.shape
+    rows, cols = np.clip(outline[:, 1], 0, height - 1), np.clip(outline[:, 0], 0, width - 1)
+    pad = math.ceil(margin_px + 2.0 * math.sqrt(2.0)) + 2
+    r0, c0 = max(0, int(rows.min()) - pad), max(0, int(cols.min()) - pad)
+    r1, c1 = min(height, int(rows.max()) + pad + 1), min(width, int(cols.max()) + pad + 1)
+    box = mask[r0:r1, c0:c1]
+    if not box.any():  # none within pad of the outline
+        return np.zeros(len(outline), dtype=bool)
+    distance = ndimage.distance_transform_edt(~box)
+    return ndimage.map_coordinates(distance, [rows - r0, cols - c0], order=1, mode="nearest") <= margin_px
+
+
+def _thickness(blob: np.ndarray, radius: float) -> float:
+    """Radius of the largest circle inside ``blob`` over the equal-area radius ``radius``."""
+    if not blob.any():
+        return 0.0
+    inscribed = float(cv2.distanceTransform(np.pad(blob, 1).view(np.uint8), cv2.DIST_L2, 5).max())
+    return inscribed / max(radius, 1e-6)
