@@ -52,7 +52,7 @@ import numpy as np
 from scipy import ndimage
 
 from bokehfit.discs.contours import _deep_concavities, _edge_gradient, polygon_area_centroid
-from bokehfit.discs.levels import _contrast_ok, _median
+from bokehfit.discs.levels import Window, _contrast_ok, _median
 from bokehfit.discs.outlines import EDGE_WIDTH_MIN_PX, Outlined
 
 __all__ = ["Measurement", "describe", "MIN_SOLIDITY", "MAX_ELONGATION", "MIN_THICKNESS_REL", "RING_DIP"]
@@ -122,59 +122,33 @@ class Measurement:
 
 def describe(luminance, clipped_mask, found: Outlined, min_noise, min_diameter_px) -> Measurement:
     """The :class:`Measurement` of a closed outline: size, shape, flags, what is seen, and the verdict."""
-    height, width = luminance.shape
-    r0, c0, r1, c1 = found.window.r0, found.window.c0, found.window.r1, found.window.c1
-    crop, outline, merged, bridged, on_cut = found.crop, found.outline, found.merged, found.bridged, found.on_cut
-    background, plateau, noise, ring_lift = found.levels.background, found.levels.plateau, found.levels.noise, found.levels.ring_lift
+    window, crop, outline, levels = found.window, found.crop, found.outline, found.levels
+    background, plateau, noise = levels.background, levels.plateau, levels.noise
     contrast = plateau - background
     area, cx, cy = polygon_area_centroid(outline)
     diameter = 2.0 * math.sqrt(area / math.pi)
-    hull_area = float(cv2.contourArea(cv2.convexHull(outline.astype(np.float32))))
-    solidity = area / hull_area if hull_area > 0 else 0.0
-    (_, _), (side_a, side_b), _ = cv2.minAreaRect(outline.astype(np.float32))
-    elongation = max(side_a, side_b) / max(min(side_a, side_b), 1e-6)
+    solidity, elongation = _solidity(outline, area), _elongation(outline)
     inside = np.zeros(crop.shape, dtype=np.uint8)
     cv2.fillPoly(inside, [np.round(outline).astype(np.int32)], 1)
-    blob = inside.astype(bool)
     # The edge is measured where it is seen: not along a cutting circle or a filled-in arc.
-    edge_points = outline[~on_cut] if (~on_cut).sum() >= 4 else outline
+    edge_points = outline[~found.on_cut] if (~found.on_cut).sum() >= 4 else outline
     edge_width = contrast / max(_edge_gradient(crop, edge_points), 1e-12)
-    outline_xy = outline + np.array([c0, r0], dtype=np.float64)
-    # The padded contour runs outside [0, size − 1] only where the frame cuts the disc.
-    off_frame = (outline_xy[:, 0] < 0.0) | (outline_xy[:, 1] < 0.0)
-    off_frame |= (outline_xy[:, 0] > width - 1) | (outline_xy[:, 1] > height - 1)
-    clipped = bool(off_frame.any())
-    unseen = off_frame | on_cut | _near(bridged, outline, UNSEEN_MARGIN_PX)
-    saturated = clipped_beyond = False
-    clipped_share = 0.0
-    if clipped_mask is not None:
-        clipped_crop = clipped_mask[r0:r1, c0:c1]
-        clipped_share = float(clipped_crop[blob].sum()) / max(float(blob.sum()), 1.0)
-        saturated = int(clipped_crop[blob].sum()) > max(1.0, SATURATED_SHARE * area)
-        if saturated:  # a saturated disc's edge is where the clipping stops
-            ring = cv2.dilate(inside, np.ones((5, 5), np.uint8)).astype(bool) & ~blob
-            clipped_beyond = bool(ring.any()) and clipped_crop[ring].mean() > MAX_CLIPPED_RING_SHARE
-            # Bloom: where the clipping runs on past the outline, that stretch is not the disc's edge.
-            unseen |= _near(ring & clipped_crop, outline, UNSEEN_MARGIN_PX)
-    from_centre = _window_distance(crop.shape, cx, cy) / max(0.5 * diameter, 1e-6)
-    centre, rim = crop[from_centre <= RING_CENTRE_REL], crop[(from_centre >= RING_RIM_REL[0]) & (from_centre <= RING_RIM_REL[1])]
-    is_ring = bool(centre.size and rim.size) and float(_median(rim) - _median(centre)) > RING_DIP * contrast
-    thickness = _thickness(blob, 0.5 * diameter)
-    depth = max(OVERLAP_DEFECT_MIN_PX, OVERLAP_DEFECT_DEPTH * 0.5 * diameter)
-    merged = merged or 2 <= _deep_concavities(outline, depth) <= 4
-    # Most of its surround lifted above the rest by other light: the bright lens
-    # where two discs overlap, or a disc sitting on another one.
-    merged = merged or ring_lift > MAX_RING_LIFT * contrast
-    snr = contrast / max(noise, min_noise)
+    outline_xy = outline + np.array([window.c0, window.r0], dtype=np.float64)
+    off_frame = _off_frame(outline_xy, luminance.shape)
+    unseen = off_frame | found.on_cut | _near(found.bridged, outline, UNSEEN_MARGIN_PX)
+    clipping = _Clipping.of(clipped_mask, window, inside, area, outline)
+    if clipping.bloom is not None:
+        unseen |= clipping.bloom
+    thickness = _thickness(inside.astype(bool), 0.5 * diameter)
 
     reason = None
     if diameter < min_diameter_px:
         reason = "too small"
-    elif clipped_beyond:
+    elif clipping.beyond:
         reason = "in a clipped region"
     elif not _contrast_ok(contrast, noise, background, diameter):
         reason = "faint"
-    elif edge_width > max(EDGE_WIDTH_MIN_PX, EDGE_WIDTH_MAX_REL * 0.5 * diameter) and not saturated:
+    elif edge_width > max(EDGE_WIDTH_MIN_PX, EDGE_WIDTH_MAX_REL * 0.5 * diameter) and not clipping.saturated:
         reason = "soft edge"
     elif elongation > MAX_ELONGATION:
         reason = "elongated"
@@ -183,26 +157,91 @@ def describe(luminance, clipped_mask, found: Outlined, min_noise, min_diameter_p
     elif solidity < MIN_SOLIDITY:
         reason = "not compact"
     return Measurement(
-        center_xy=(cx + c0, cy + r0),
+        center_xy=(cx + window.c0, cy + window.r0),
         diameter_px=diameter,
         area_px=area,
         outline_xy=outline_xy,
         plateau=plateau,
         background=background,
-        snr=snr,
+        snr=contrast / max(noise, min_noise),
         solidity=solidity,
         elongation=elongation,
         edge_width_px=edge_width,
-        saturated=saturated,
-        clipped=clipped,
-        overlaps=merged,
+        saturated=clipping.saturated,
+        clipped=bool(off_frame.any()),
+        overlaps=_overlaps(found, diameter, contrast),
         reason=reason,
         outline_reliable=~unseen,
-        clipped_share=clipped_share,
-        ring=is_ring,
-        occluded=bridged is not None,
+        clipped_share=clipping.share,
+        ring=_is_ring(crop, cx, cy, diameter, contrast),
+        occluded=found.bridged is not None,
         thickness=thickness,
     )
+
+
+def _solidity(outline: np.ndarray, area: float) -> float:
+    """The outline's area over its convex hull's."""
+    hull_area = float(cv2.contourArea(cv2.convexHull(outline.astype(np.float32))))
+    return area / hull_area if hull_area > 0 else 0.0
+
+
+def _elongation(outline: np.ndarray) -> float:
+    """The longer side of the outline's minimum-area rectangle over the shorter."""
+    (_, _), (side_a, side_b), _ = cv2.minAreaRect(outline.astype(np.float32))
+    return max(side_a, side_b) / max(min(side_a, side_b), 1e-6)
+
+
+def _off_frame(outline_xy: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """Per outline point (photo coordinates): beyond the frame. The padded contour runs outside
+    [0, size − 1] only where the frame cuts the disc."""
+    height, width = shape
+    off_frame = (outline_xy[:, 0] < 0.0) | (outline_xy[:, 1] < 0.0)
+    off_frame |= (outline_xy[:, 0] > width - 1) | (outline_xy[:, 1] > height - 1)
+    return off_frame
+
+
+@dataclass(frozen=True)
+class _Clipping:
+    """What the source's clipping says of a disc."""
+
+    share: float = 0.0  #: share of the disc's area clipped
+    saturated: bool = False  #: more than SATURATED_SHARE of it clipped
+    beyond: bool = False  #: saturated, and the clipping goes on past the outline (a larger clipped region)
+    #: Per outline point of a saturated disc: where the clipping runs on past it (bloom), or None.
+    bloom: np.ndarray | None = None
+
+    @classmethod
+    def of(cls, clipped_mask, window: Window, inside: np.ndarray, area: float, outline: np.ndarray) -> _Clipping:
+        """The clipping of the disc ``inside`` (a mask of the window) in ``clipped_mask`` (None: none)."""
+        if clipped_mask is None:
+            return cls()
+        blob = inside.astype(bool)
+        clipped_crop = window.of(clipped_mask)
+        share = float(clipped_crop[blob].sum()) / max(float(blob.sum()), 1.0)
+        saturated = int(clipped_crop[blob].sum()) > max(1.0, SATURATED_SHARE * area)
+        if not saturated:
+            return cls(share, saturated)
+        # A saturated disc's edge is where the clipping stops.
+        ring = cv2.dilate(inside, np.ones((5, 5), np.uint8)).astype(bool) & ~blob
+        beyond = bool(ring.any()) and clipped_crop[ring].mean() > MAX_CLIPPED_RING_SHARE
+        # Bloom: where the clipping runs on past the outline, that stretch is not the disc's edge.
+        return cls(share, saturated, beyond, _near(ring & clipped_crop, outline, UNSEEN_MARGIN_PX))
+
+
+def _is_ring(crop: np.ndarray, cx: float, cy: float, diameter: float, contrast: float) -> bool:
+    """The disc's rim lies above its centre by more than RING_DIP of its contrast."""
+    from_centre = _window_distance(crop.shape, cx, cy) / max(0.5 * diameter, 1e-6)
+    centre, rim = crop[from_centre <= RING_CENTRE_REL], crop[(from_centre >= RING_RIM_REL[0]) & (from_centre <= RING_RIM_REL[1])]
+    return bool(centre.size and rim.size) and float(_median(rim) - _median(centre)) > RING_DIP * contrast
+
+
+def _overlaps(found: Outlined, diameter: float, contrast: float) -> bool:
+    """Cut out of other light, shaped like two to four merged discs, or on other light."""
+    depth = max(OVERLAP_DEFECT_MIN_PX, OVERLAP_DEFECT_DEPTH * 0.5 * diameter)
+    # Most of its surround lifted above the rest by other light: the bright lens
+    # where two discs overlap, or a disc sitting on another one.
+    return (found.merged or 2 <= _deep_concavities(found.outline, depth) <= 4
+            or found.levels.ring_lift > MAX_RING_LIFT * contrast)
 
 
 def _window_distance(shape: tuple[int, int], cx: float, cy: float) -> np.ndarray:
