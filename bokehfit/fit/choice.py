@@ -12,7 +12,7 @@ import math
 import cv2
 import numpy as np
 
-from bokehfit.discs import USABLE_EVIDENCE, Disc
+from bokehfit.discs import MIN_FIT_SEEN, USABLE_EVIDENCE, Disc
 from bokehfit.fit.agreement import ELONGATED_ANGLE_SPREAD_DEG, ELONGATED_ASPECT_SPREAD, MIN_ELONGATED_DISCS
 from bokehfit.fit.families import Family
 from bokehfit.fit.features import VIGNETTING_MIN_FIELD
@@ -20,7 +20,7 @@ from bokehfit.fit.pixels import field_position
 from bokehfit.fit.signature import Ellipse, Screen, fit_ellipse, screen
 from bokehfit.metrics import angle_error
 
-__all__ = ["choose_discs", "slit_aspect", "REGULAR_OUTLINE_MISFIT", "CATEYE_AXIS_DEG", "CHOICE_POOL"]
+__all__ = ["choose_discs", "no_disc_reason", "slit_aspect", "REGULAR_OUTLINE_MISFIT", "CATEYE_AXIS_DEG", "CHOICE_POOL"]
 
 #: A disc's outline is regular when some aperture shape (not an elongated one) fits it this well:
 #: median radial misfit in equal-area radii. Bokeh discs of a real lens show 0.01–0.05 (noise,
@@ -123,3 +123,16 @@ def choose_discs(discs: list[Disc], families: tuple[Family, ...], max_discs: int
 def slit_aspect(disc: Disc) -> float:
     (_, _), (a, b), _ = cv2.minAreaRect(disc.outline_xy.astype(np.float32))
     return float(np.clip(math.sqrt(min(a, b) / max(a, b, 1e-9)), 0.02, 1.0))
+
+
+def no_disc_reason(discs: list[Disc], set_aside: dict[int, str]) -> str:
+    """Why no disc could be fitted: how many of ``discs`` were found, and what kept each kind out."""
+    flagged = {
+        "cut by the frame": sum(d.clipped for d in discs),
+        "under 8 px": sum(not d.resolvable for d in discs),
+        "seen only in part": sum(d.outline_seen < MIN_FIT_SEEN for d in discs),
+        "with an outline no aperture shape explains": len(set_aside),
+    }
+    why = ", ".join(f"{n} {what}" for what, n in flagged.items() if n)
+    found = f"{len(discs)} found: {why}" if discs else "none found"
+    return f"no disc is clean enough to fit ({found})"
