@@ -73,7 +73,8 @@ def split_cluster(m: Measurement) -> list[Measurement]:
         own = (owner == k) & seen_before & ~junction
         if own.sum() < SPLIT_MIN_POINTS:
             continue
-        cx, cy, radius = _fit_circle(local[own])
+        fitted = _fit_circle(local[own])
+        cx, cy, radius = fitted.cx, fitted.cy, fitted.radius
         inscribed = float(depth[peaks[k - 1][0], peaks[k - 1][1]])
         if not 0.5 * inscribed <= radius <= 2.0 * inscribed:
             return []  # the own points do not bound a disc around this peak: not a cluster of discs
@@ -85,16 +86,16 @@ def split_cluster(m: Measurement) -> list[Measurement]:
         inside = float(mask[circle].mean()) if circle.any() else 0.0
         if misfit > SPLIT_MAX_MISFIT_REL * radius or arc < SPLIT_MIN_ARC or inside < SPLIT_MIN_INSIDE:
             return []  # a streak or a blob of another shape, not round discs run together
-        outline, seen = _completed_outline(local[own], cx, cy, radius)
+        completed = _completed_outline(local[own], fitted)
         parts.append(
             replace(
                 m,
                 center_xy=(cx + origin[0], cy + origin[1]),
                 diameter_px=2.0 * radius,
                 area_px=math.pi * radius * radius,
-                outline_xy=outline + origin,
+                outline_xy=completed.points + origin,
                 overlaps=True,
-                outline_reliable=seen,
+                outline_reliable=completed.seen,
             )
         )
     return parts if len(parts) >= 2 else []

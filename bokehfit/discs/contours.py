@@ -12,6 +12,7 @@ that a contour cut by the frame closes just outside it (its points there lie out
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
@@ -127,18 +128,36 @@ def _open_in_window(outline: np.ndarray, shape: tuple[int, int], window: Window,
     )
 
 
-def _fit_circle(xy: np.ndarray) -> tuple[float, float, float]:
-    """Centre and radius of the circle through ``xy`` (algebraic least squares, Kåsa 1976)."""
+@dataclass(frozen=True)
+class Circle:
+    """A circle, in the coordinates of the points it was fitted to."""
+
+    cx: float
+    cy: float
+    radius: float
+
+
+@dataclass(frozen=True)
+class SeenOutline:
+    """A closed outline and, per point, whether it is seen: the disc's own edge, not filled in."""
+
+    points: np.ndarray  #: (N, 2), (x, y) = (column, row)
+    seen: np.ndarray
+
+
+def _fit_circle(xy: np.ndarray) -> Circle:
+    """The circle through ``xy`` (algebraic least squares, Kåsa 1976)."""
     x, y = xy[:, 0], xy[:, 1]
     design = np.column_stack([x, y, np.ones(len(x))])
     (a, b, c), *_ = np.linalg.lstsq(design, x * x + y * y, rcond=None)
     cx, cy = 0.5 * a, 0.5 * b
-    return float(cx), float(cy), float(math.sqrt(max(c + cx * cx + cy * cy, 0.0)))
+    return Circle(float(cx), float(cy), float(math.sqrt(max(c + cx * cx + cy * cy, 0.0))))
 
 
-def _completed_outline(own: np.ndarray, cx: float, cy: float, radius: float) -> tuple[np.ndarray, np.ndarray]:
-    """The own outline points with the circle filled in where they leave gaps, ordered by angle,
-    and per point whether it is one of the own points."""
+def _completed_outline(own: np.ndarray, circle: Circle) -> SeenOutline:
+    """The own outline points with the circle filled in where they leave gaps, ordered by angle;
+    seen: the own points."""
+    cx, cy, radius = circle.cx, circle.cy, circle.radius
     angles = np.arctan2(own[:, 1] - cy, own[:, 0] - cx)
     step = 1.0 / max(radius, 1.0)  # about a pixel along the circle
     grid = np.arange(-math.pi, math.pi, step)
@@ -147,4 +166,4 @@ def _completed_outline(own: np.ndarray, cx: float, cy: float, radius: float) -> 
     points = np.vstack([own, filled])
     seen = np.concatenate([np.ones(len(own), bool), np.zeros(len(filled), bool)])
     order = np.argsort(np.concatenate([angles, grid[gap]]))
-    return points[order], seen[order]
+    return SeenOutline(points[order], seen[order])

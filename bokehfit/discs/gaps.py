@@ -20,12 +20,13 @@ Notes
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
 from skimage import measure
 
-from bokehfit.discs.contours import _completed_outline, _fit_circle
+from bokehfit.discs.contours import SeenOutline, _completed_outline, _fit_circle
 
 __all__ = ["OCCLUSION_BRIDGE_REL", "OCCLUSION_MIN_SHARE"]
 
@@ -54,9 +55,18 @@ RING_MIN_ARC = 0.5
 RING_ARC_TOLERANCE = 0.1
 
 
-def _bridge_occluders(crop, distance, level, plateau, radius):
+@dataclass(frozen=True)
+class Raised:
+    """A crop with a disc's gaps raised to its plateau, and the pixels that closed a gap (the outline
+    next to them is not the disc's own), or None where none did."""
+
+    crop: np.ndarray
+    pixels: np.ndarray | None
+
+
+def _bridge_occluders(crop, distance, level, plateau, radius) -> Raised:
     """``crop`` with thin occluders across the disc raised to the plateau, and the
-    bridged pixels; ``(crop, None)`` where nothing was bridged.
+    bridged pixels; ``crop`` as it is where nothing was bridged.
 
     The region above ``level`` (holes filled: a hole inside the disc leaves the
     outline alone) is closed with a square of half-side ``OCCLUSION_BRIDGE_REL`` · r
@@ -65,15 +75,15 @@ def _bridge_occluders(crop, distance, level, plateau, radius):
     centre count, so the gap to a neighbouring disc is not bridged.
     """
     if radius < OCCLUSION_MIN_RADIUS_PX:
-        return crop, None
+        return Raised(crop, None)
     side = 2 * max(2, int(round(OCCLUSION_BRIDGE_REL * radius))) + 1
     box = _box(distance, 1.05 * radius + 1.0 + side)
     raised, bridged = _bridge_in_box(crop[box], distance[box], level, plateau, radius, side)
     if bridged is None:
-        return crop, None
+        return Raised(crop, None)
     crop, mask = crop.copy(), np.zeros(crop.shape, dtype=bool)
     crop[box], mask[box] = raised, bridged
-    return crop, mask
+    return Raised(crop, mask)
 
 
 def _fill_holes(mask: np.ndarray) -> np.ndarray:
@@ -118,9 +128,9 @@ def _bridge_in_box(crop, distance, level, plateau, radius, side):
     return np.where(bridged, np.float32(max(plateau, level)), crop), bridged
 
 
-def _ring_arc(crop, level, seed_rc, radius):
-    """The outer arcs of a ring's broken rim and the circle through them: ``(outline,
-    seen)`` with the circle filled in where the rim is not seen, or None.
+def _ring_arc(crop, level, seed_rc, radius) -> SeenOutline | None:
+    """The outer arcs of a ring's broken rim and the circle through them: the outline, with
+    the circle filled in where the rim is not seen, or None.
 
     Around the seed, in RING_ARC_BINS directions, the farthest point of the 50 %
     contours between RING_ARC_BAND times the radius is the rim's outer edge; a
@@ -149,16 +159,17 @@ def _ring_arc(crop, level, seed_rc, radius):
     for _ in range(2):
         if len(rim) < RING_MIN_ARC * RING_ARC_BINS:
             return None
-        cx, cy, fitted = _fit_circle(rim)
-        rim = rim[np.abs(np.hypot(rim[:, 0] - cx, rim[:, 1] - cy) - fitted) <= RING_ARC_TOLERANCE * fitted]
+        circle = _fit_circle(rim)
+        off = np.abs(np.hypot(rim[:, 0] - circle.cx, rim[:, 1] - circle.cy) - circle.radius)
+        rim = rim[off <= RING_ARC_TOLERANCE * circle.radius]
     if len(rim) < RING_MIN_ARC * RING_ARC_BINS:
         return None
-    cx, cy, fitted = _fit_circle(rim)
-    order = np.argsort(np.arctan2(rim[:, 1] - cy, rim[:, 0] - cx))
-    return _completed_outline(rim[order], cx, cy, fitted)
+    circle = _fit_circle(rim)
+    order = np.argsort(np.arctan2(rim[:, 1] - circle.cy, rim[:, 0] - circle.cx))
+    return _completed_outline(rim[order], circle)
 
 
-def _close_ring(crop, distance, level, plateau, radius):
+def _close_ring(crop, distance, level, plateau, radius) -> Raised:
     """``crop`` with a ring's rim closed where it breaks and its darker centre raised to the
     plateau, so that its outer outline closes; and the pixels that closed the rim (their
     outline is not seen), or None.
@@ -178,7 +189,7 @@ def _close_ring(crop, distance, level, plateau, radius):
     raised = crop.copy()
     raised[box] = np.where(filled & ~above, np.float32(max(plateau, level)), crop[box])
     if not gaps.any():
-        return raised, None
+        return Raised(raised, None)
     mask = np.zeros(crop.shape, dtype=bool)
     mask[box] = gaps
-    return raised, mask
+    return Raised(raised, mask)

@@ -101,19 +101,19 @@ def _closed_outline(luminance, center_xy, radius, reach, core_rel=0.8, percentil
             crop = crop - plane.over(crop.shape)
         seed_rc = (center_xy[1] - window.r0, center_xy[0] - window.c0)
         if core_rel == RING_CORE_REL:
-            bridged_crop, bridged = _close_ring(crop, distance, level, plateau, radius)
+            raised = _close_ring(crop, distance, level, plateau, radius)
         else:
-            bridged_crop, bridged = _bridge_occluders(crop, distance, level, plateau, radius)
-        outline = _outline(_quieted(bridged_crop, plateau - background, noise, radius), level, background, seed_rc)
+            raised = _bridge_occluders(crop, distance, level, plateau, radius)
+        outline = _outline(_quieted(raised.crop, plateau - background, noise, radius), level, background, seed_rc)
         if outline is None and core_rel == RING_CORE_REL:
             arc = _ring_arc(crop, level, seed_rc, radius)
             if arc is not None:  # a rim that breaks: its arcs, and the circle through them
-                return Outlined(window, crop, Levels(background, plateau, noise, ring_lift), arc[0], False, None, ~arc[1])
+                return Outlined(window, crop, Levels(background, plateau, noise, ring_lift), arc.points, False, None, ~arc.seen)
         if outline is None:
             return "no outline"
         if not _open_in_window(outline, crop.shape, window, (height, width)):
             levels = Levels(background, plateau, noise, ring_lift)
-            return Outlined(window, crop, levels, outline, False, bridged, np.zeros(len(outline), dtype=bool))
+            return Outlined(window, crop, levels, outline, False, raised.pixels, np.zeros(len(outline), dtype=bool))
     # Still open: part of a larger bright structure, or discs run together. Cut
     # the disc out of it with a circle through its neighbours' gap.
     masked = np.where(distance <= reach, crop, min(background, level - 1e-6)).astype(np.float32)
