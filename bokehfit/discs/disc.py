@@ -1,0 +1,356 @@
+"""What a disc search gives, what it takes, and how its measurements become its discs.
+
+The types of the result: a :class:`Disc` (what it offers as evidence of the aperture's shape, and
+whether the fit can use it), a :class:`Rejection` (a measured candidate that is not a disc, and why)
+and the :class:`DiscSearch` that holds them. The checks of the searches' inputs (the image and the
+limits), shared by :func:`bokehfit.discs.find_discs` and :func:`bokehfit.discs.measure_discs_at`.
+And the making of the result from the measurements (:func:`_discs_of`): one measurement per disc,
+each disc's own share of its outline where discs overlap, their clusters, and their evidence.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections import Counter
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+from scipy.spatial import cKDTree
+
+from bokehfit.discs.measure import RESOLVABLE_PX, Measurement
+from bokehfit.errors import InputError, check_finite
+
+#: Two measurements are of one disc when their centres lie within this share of the diameter and
+#: the ratio of their sizes within these bounds.
+SAME_DISC_CENTRE_REL = 0.25
+SAME_DISC_SIZE_RATIOS = (0.75, 1.33)
+#: A disc whose reliable share of the outline reaches this is seen whole (a stray point or two
+#: near a frame corner or a pixel of bloom do not make it partial).
+FULL_OUTLINE_SEEN = 0.98
+#: What a usable disc offers (:attr:`Disc.evidence`), best first.
+USABLE_EVIDENCE = ("plateau", "edge", "partial")
+#: Least share of its outline a disc must show to say something about the shape ...
+MIN_OUTLINE_SEEN = 0.5
+#: ... and to be fitted (the rest of its crop, another light's, is left out of the fit).
+MIN_FIT_SEEN = 0.75
+#: Outline points closer than this (px) inside another disc's outline belong to the overlap.
+OVERLAP_MARGIN_PX = 1.5
+#: Smallest image searched, in pixels a side: a disc needs a surround to be told from the background.
+MIN_IMAGE_SIDE_PX = 8
+#: Largest luminance accepted (linear light, 1.0 = white). Highlights of real photos stay far
+#: below it; squares of larger values overflow float32 in the fit.
+MAX_LUMINANCE = 1e6
+
+
+@dataclass(frozen=True)
+class Disc:
+    """A bokeh disc found in a photo (design.md §7 names; coordinates (x, y) = (column, row))."""
+
+    index: int
+    center_xy: tuple[float, float]
+    diameter_px: float
+    outline_xy: np.ndarray
+    plateau: float
+    background: float
+    snr: float
+    saturated: bool
+    clipped: bool
+    overlaps: bool
+    resolvable: bool
+    #: What the disc offers: "plateau" (clean), "edge" (the outline only: saturated, a ring or a bright centre),
+    #: "partial" (part of the outline: cut, occluded, overlapping or joined by bloom).
+    evidence: str = "plateau"
+    #: Share of the outline that is the disc's own and reliable, 0–1.
+    outline_seen: float = 1.0
+    #: Per point of ``outline_xy``: True where the outline is the disc's own and reliable.
+    outline_reliable: np.ndarray | None = None
+    #: Shared by discs whose outlines overlap; None for a disc on its own.
+    cluster: int | None = None
+    ring: bool = False  #: rim brighter than the centre (soap-bubble disc)
+    bright_centre: bool = False  #: centre brighter than the rim, the edge a step below it (rim < 0)
+    occluded: bool = False  #: crossed by a thin occluder (bridged, outline there not seen)
+    clipped_share: float = 0.0  #: share of the disc's area clipped in the source
+
+    @property
+    def usable(self) -> bool:
+        """The fit can use it: resolvable, not cut by the frame, and at least MIN_FIT_SEEN of its outline
+        its own: a clean plateau, an outline of its own (``edge``: a saturated disc, fitted with its clipped
+        pixels as lower bounds, a ring or a bright centre, fitted with the rim profile), or one seen in part
+        (``partial``: overlapping others, whose light is left out of its fit, or crossed by an occluder,
+        whose pixels are)."""
+        return (self.resolvable and self.evidence in USABLE_EVIDENCE and not self.clipped
+                and self.outline_seen >= MIN_FIT_SEEN)
+
+    @property
+    def shape_usable(self) -> bool:
+        """Its outline says something about the shape: resolvable and at least MIN_OUTLINE_SEEN of it seen."""
+        return self.resolvable and self.outline_seen >= MIN_OUTLINE_SEEN
+
+    def to_json(self, outline: bool = True) -> dict:
+        data = {
+            "index": self.index,
+            "center_xy": [round(float(self.center_xy[0]), 3), round(float(self.center_xy[1]), 3)],
+            "diameter_px": round(float(self.diameter_px), 3),
+            "angle_deg": None,
+            "iou": None,
+            "hausdorff_rel": None,
+            "saturated": bool(self.saturated),
+            "clipped": bool(self.clipped),
+            "overlaps": bool(self.overlaps),
+            "resolvable": bool(self.resolvable),
+            "usable": bool(self.usable),
+            "plateau": float(self.plateau),
+            "background": float(self.background),
+            "snr": round(float(self.snr), 2),
+            "evidence": self.evidence,
+            "outline_seen": round(float(self.outline_seen), 3),
+            "cluster": self.cluster,
+            "ring": bool(self.ring),
+            "bright_centre": bool(self.bright_centre),
+            "occluded": bool(self.occluded),
+            "clipped_share": round(float(self.clipped_share), 4),
+        }
+        if outline:
+            data["outline_xy"] = np.round(self.outline_xy, 3).tolist()
+            if self.outline_reliable is not None:
+                data["outline_reliable"] = [bool(v) for v in self.outline_reliable]
+        return data
+
+
+@dataclass(frozen=True)
+class Rejection:
+    """A measured candidate that is not a disc, and why."""
+
+    center_xy: tuple[float, float]
+    diameter_px: float
+    rejected_because: str
+
+    def to_json(self) -> dict:
+        return {
+            "center_xy": [round(float(self.center_xy[0]), 2), round(float(self.center_xy[1]), 2)],
+            "diameter_px": round(float(self.diameter_px), 2),
+            "rejected_because": self.rejected_because,
+        }
+
+
+@dataclass(frozen=True)
+class DiscSearch:
+    """What :func:`find_discs` found; falsy (with ``reason``) when no disc was found."""
+
+    discs: list[Disc]
+    candidates: int
+    rejected: Counter = field(default_factory=Counter)
+    time_s: float = 0.0
+    #: One line each, for people: limits reached (``"30976 candidates found, the 2000 clearest measured"``).
+    notes: tuple[str, ...] = ()
+    #: Every measured candidate that was not kept, with its reason (those beyond the
+    #: candidate limit are only counted).
+    rejections: tuple[Rejection, ...] = ()
+
+    def __bool__(self) -> bool:
+        return bool(self.discs)
+
+    def __len__(self) -> int:
+        return len(self.discs)
+
+    @property
+    def reason(self) -> str:
+        """Why nothing was found (empty when discs were found)."""
+        if self.discs:
+            return ""
+        if not self.candidates:
+            return "no highlight stands out from the background"
+        why = ", ".join(f"{n} {reason}" for reason, n in self.rejected.most_common())
+        return f"no disc among {self.candidates} highlight candidates ({why})"
+
+
+def _check_image(luminance) -> np.ndarray:
+    """``luminance`` as a float32 (M, N) array, or ``InputError`` naming what is wrong."""
+    try:
+        array = np.asarray(luminance)
+    except Exception:  # noqa: BLE001 - ragged lists and the like
+        raise InputError("luminance must be a 2-D array of numbers (got an object NumPy cannot read)") from None
+    if array.dtype == np.bool_ or array.dtype.kind not in "uif":
+        raise InputError(f"luminance must be a 2-D array of real numbers (got dtype {array.dtype})")
+    if array.ndim != 2:
+        raise InputError(f"luminance must be a 2-D array (got shape {array.shape})")
+    if min(array.shape) < MIN_IMAGE_SIDE_PX:
+        raise InputError(
+            f"luminance must be at least {MIN_IMAGE_SIDE_PX}×{MIN_IMAGE_SIDE_PX} pixels (got shape {array.shape})"
+        )
+    if array.dtype != np.float32:
+        with np.errstate(over="ignore"):  # float64 beyond float32's range becomes inf: refused below
+            array = array.astype(np.float32)
+    # Reductions, not element-wise tests: no temporary the size of the image. NaN makes both NaN.
+    low, high = float(array.min()), float(array.max())
+    if not (math.isfinite(low) and math.isfinite(high)):
+        raise InputError("luminance contains NaN or Inf values")
+    peak = max(abs(low), abs(high))
+    if peak > MAX_LUMINANCE:
+        raise InputError(
+            f"luminance reaches {peak:.3g}; find_discs expects linear light with 1.0 = white and values up to"
+            f" {MAX_LUMINANCE:g}: scale the image"
+        )
+    return array
+
+
+def _check_parameters(shape, clipped, min_diameter_px, max_diameter_px, max_discs) -> tuple:
+    """Validated ``(clipped, min_diameter_px, max_diameter_px, max_discs)`` (module constants for limits)."""
+    if clipped is not None:
+        clipped = np.asarray(clipped)
+        if clipped.shape != shape:
+            raise InputError(f"clipped must have the shape of luminance {shape} (got {clipped.shape})")
+        if clipped.dtype != np.bool_:
+            if clipped.dtype.kind not in "uif":
+                raise InputError(f"clipped must be a boolean array (got dtype {clipped.dtype})")
+            clipped = clipped != 0
+    min_diameter_px = check_finite("min_diameter_px", min_diameter_px)
+    if min_diameter_px < 1.0:
+        raise InputError(f"min_diameter_px must be at least 1 (got {min_diameter_px:g})")
+    if isinstance(max_diameter_px, bool):
+        raise InputError(f"max_diameter_px must be a number or inf (got {max_diameter_px!r})")
+    try:
+        max_diameter_px = float(max_diameter_px)
+    except (TypeError, ValueError):
+        raise InputError(f"max_diameter_px must be a number or inf (got {max_diameter_px!r})") from None
+    if math.isnan(max_diameter_px) or max_diameter_px <= min_diameter_px:
+        raise InputError(
+            f"max_diameter_px must be above min_diameter_px ({min_diameter_px:g}), or inf for no limit"
+            f" (got {max_diameter_px:g})"
+        )
+    if max_discs is not None:
+        if isinstance(max_discs, bool) or not isinstance(max_discs, (int, np.integer)) or max_discs < 1:
+            raise InputError(f"max_discs must be a whole number of at least 1 (got {max_discs!r})")
+        max_discs = int(max_discs)
+    return clipped, min_diameter_px, max_diameter_px, max_discs
+
+
+def _discs_of(measurements, found, rejected, start, notes, rejections, max_discs) -> DiscSearch:
+    """The search's discs from its measurements: one per disc, largest first, each with what it offers."""
+    measurements = _distinct_measurements(measurements)
+    measurements.sort(key=lambda m: -m.diameter_px)
+    if max_discs is not None:
+        measurements = measurements[:max_discs]
+    overlaps = _flag_neighbours(measurements)
+    own, clusters = _own_outlines(measurements)
+    discs = []
+    for i, (m, overlap, reliable, cluster) in enumerate(zip(measurements, overlaps, own, clusters)):
+        seen = float(reliable.mean()) if len(reliable) else 0.0
+        if seen < FULL_OUTLINE_SEEN or cluster is not None:  # in a cluster its light is not all its own
+            evidence = "partial"
+        elif m.saturated or m.ring or m.bright_centre:
+            evidence = "edge"
+        else:
+            evidence = "plateau"
+        discs.append(
+            Disc(
+                index=i,
+                center_xy=m.center_xy,
+                diameter_px=m.diameter_px,
+                outline_xy=m.outline_xy,
+                plateau=m.plateau,
+                background=m.background,
+                snr=m.snr,
+                saturated=m.saturated,
+                clipped=m.clipped,
+                overlaps=overlap or cluster is not None,
+                resolvable=m.diameter_px >= RESOLVABLE_PX,
+                evidence=evidence,
+                outline_seen=seen,
+                outline_reliable=reliable,
+                cluster=cluster,
+                ring=m.ring,
+                bright_centre=m.bright_centre,
+                occluded=m.occluded,
+                clipped_share=m.clipped_share,
+            )
+        )
+    return DiscSearch(discs, found, +rejected, time.perf_counter() - start, tuple(notes), tuple(rejections))
+
+
+def _flag_neighbours(measurements: list[Measurement]) -> list[bool]:
+    """True for discs whose outline reaches into another disc's extent."""
+    if len(measurements) < 2:
+        return [m.overlaps for m in measurements]
+    centres = np.array([m.center_xy for m in measurements])
+    reach = np.array([np.max(np.hypot(*(m.outline_xy - m.center_xy).T)) for m in measurements])
+    tree = cKDTree(centres)
+    flags = []
+    for i, m in enumerate(measurements):
+        near = tree.query_ball_point(m.center_xy, reach[i] + reach.max())
+        touching = any(j != i and np.hypot(*(centres[j] - centres[i])) < reach[i] + reach[j] for j in near)
+        flags.append(m.overlaps or touching)
+    return flags
+
+
+def _own_outlines(measurements: list[Measurement]) -> tuple[list[np.ndarray], list[int | None]]:
+    """Per disc, which outline points are its own and reliable, and its cluster id.
+
+    A point of one disc's outline that lies inside another disc's outline (or
+    within OVERLAP_MARGIN_PX of it) is the overlap's edge, not the disc's, unless
+    the outline was traced as the disc's own step down (``own_step``: light adds,
+    so that step is its edge inside the other's light too). Discs
+    that overlap so are joined into clusters (numbered from 0 by their largest
+    disc); a disc on its own has cluster None.
+    """
+    own = [
+        m.outline_reliable.copy() if m.outline_reliable is not None else np.ones(len(m.outline_xy), bool)
+        for m in measurements
+    ]
+    parent = list(range(len(measurements)))
+
+    def root(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    if len(measurements) >= 2:
+        centres = np.array([m.center_xy for m in measurements])
+        reach = np.array([np.max(np.hypot(*(m.outline_xy - m.center_xy).T)) for m in measurements])
+        tree = cKDTree(centres)
+        for i, m in enumerate(measurements):
+            for j in tree.query_ball_point(m.center_xy, reach[i] + reach.max() + OVERLAP_MARGIN_PX):
+                if j == i or np.hypot(*(centres[j] - centres[i])) > reach[i] + reach[j] + OVERLAP_MARGIN_PX:
+                    continue
+                other = measurements[j].outline_xy.astype(np.float32)
+                inside = np.array(
+                    [cv2.pointPolygonTest(other, (float(x), float(y)), True) >= -OVERLAP_MARGIN_PX for x, y in m.outline_xy]
+                )
+                if inside.any():
+                    if not m.own_step:  # a contour through the sum of two discs' light is neither's edge
+                        own[i] &= ~inside
+                    parent[root(i)] = root(j)
+    roots = [root(i) for i in range(len(measurements))]
+    sizes = Counter(roots)
+    numbers: dict[int, int] = {}
+    clusters = [numbers.setdefault(r, len(numbers)) if sizes[r] > 1 else None for r in roots]
+    return own, clusters
+
+
+def _same_size(diameter_px: float, other_px: float) -> bool:
+    """Two measurements of one disc: the ratio of their sizes within SAME_DISC_SIZE_RATIOS (their
+    centres within SAME_DISC_CENTRE_REL of the diameter)."""
+    low, high = SAME_DISC_SIZE_RATIOS
+    return low < diameter_px / other_px < high
+
+
+def _distinct_measurements(measurements: list[Measurement]) -> list[Measurement]:
+    """One measurement per disc: two candidates that converged on the same outline count once."""
+    kept: list[Measurement] = []
+    if not measurements:
+        return kept
+    order = sorted(measurements, key=lambda m: -m.snr)
+    tree = cKDTree(np.array([m.center_xy for m in order]))
+    dropped = np.zeros(len(order), dtype=bool)
+    for i, m in enumerate(order):
+        if dropped[i]:
+            continue
+        kept.append(m)
+        for j in tree.query_ball_point(m.center_xy, SAME_DISC_CENTRE_REL * m.diameter_px):
+            other = order[j]
+            if j > i and _same_size(other.diameter_px, m.diameter_px):
+                dropped[j] = True
+    return kept
