@@ -29,7 +29,6 @@ from __future__ import annotations
 import math
 import time
 from collections import Counter
-from dataclasses import replace
 
 import cv2
 import numpy as np
@@ -51,12 +50,10 @@ from bokehfit.discs.disc import (
     _check_image,
     _check_parameters,
     _discs_of,
-    _distinct_measurements,
-    _own_outlines,
     _same_size,
 )
 from bokehfit.discs.measure import RESOLVABLE_PX, Measurement, measure_candidate, split_cluster
-from bokehfit.discs.rays import measure_rays
+from bokehfit.discs.places import MIN_NOISE, _by_own_steps, _by_rays_after, _measure_place, measure_discs_at
 
 __all__ = [
     "Disc",
@@ -114,8 +111,6 @@ BLOB_RAYS_AFTER = ("faint", "soft edge")
 BLOB_RAYS_MIN_DIAMETER_PX = 2.0 * RESOLVABLE_PX
 #: Most circles through edges measured per photo (module bokehfit.discs.circles; the clearest first).
 MAX_CIRCLES = MAX_CANDIDATES // 10
-#: Noise floor of the local noise estimate (linear units).
-MIN_NOISE = 1e-4
 
 
 def _distinct(candidates: list[Candidate]) -> list[Candidate]:
@@ -304,116 +299,3 @@ def _circle_discs(luminance, clipped, measurements, min_diameter_px, max_diamete
             rejected[reason] += 1
             rejections.append(Rejection(xy, diameter, reason))
     return measured
-
-
-def measure_discs_at(
-    luminance: np.ndarray,
-    clipped: np.ndarray | None = None,
-    places=(),
-) -> DiscSearch:
-    """Measure the discs at given places (a person's picks), and only those.
-
-    Parameters
-    ----------
-    luminance, clipped : as :func:`find_discs`.
-    places : iterable of ((x, y), diameter_px)
-        Each disc's centre (full-resolution pixels, y down) and about how large it is.
-
-    Returns
-    -------
-    DiscSearch
-        Each place measured afresh as :func:`find_discs` measures a candidate (outline, levels,
-        evidence), whatever the finder's own tests of a disc would say: the person vouches that
-        it is one. A place that overlaps others is measured as the part of its cluster closest to
-        it. A place where no outline of about that size can be drawn is listed in ``rejections``
-        with the reason; the others are the discs (not usable ones keep their reasons).
-    """
-    start = time.perf_counter()
-    luminance = _check_image(luminance)
-    clipped, _, _, _ = _check_parameters(luminance.shape, clipped, 1.0, math.inf, None)
-    places = [((float(x), float(y)), float(d)) for (x, y), d in places]
-    rejected: Counter = Counter()
-    rejections: list[Rejection] = []
-    measurements: list[Measurement] = []
-    for xy, diameter in places:
-        m = _measure_place(luminance, clipped, xy, diameter)
-        if isinstance(m, str):
-            rejected[m] += 1
-            rejections.append(Rejection(xy, diameter, m))
-        else:
-            measurements.append(replace(m, reason=None))
-    measurements = [replace(m, reason=None) for m in _by_own_steps(luminance, clipped, measurements, 1.0)]
-    return _discs_of(measurements, len(places), rejected, start, [], rejections, None)
-
-
-def _measure_place(luminance, clipped, xy, diameter: float, min_diameter_px: float = 1.0,
-                   rays_after: tuple[str, ...] | None = None) -> Measurement | str:
-    """The disc at a place and about a size (a person's pick, a circle through an edge): measured as a
-    candidate there; where it overlaps others, the part of its cluster closest to the place. A reason
-    where no outline of about that size can be drawn there. The measurement's own ``reason`` (its
-    tests of a disc) is left for the caller to weigh."""
-    height, width = luminance.shape
-    if not (0 <= xy[0] < width and 0 <= xy[1] < height):
-        return "outside the photo"
-    m = _contour_at_place(luminance, clipped, xy, diameter, min_diameter_px)
-    return _by_rays_after(luminance, clipped, m, xy, diameter, min_diameter_px, rays_after)
-
-
-def _by_rays_after(luminance, clipped, m: Measurement | str, xy, diameter: float, min_diameter_px: float,
-                   rays_after: tuple[str, ...] | None) -> Measurement | str:
-    """The contour's measurement ``m`` at a place, or, where it finds no disc there for one of the reasons
-    ``rays_after`` (any reason: None), the disc measured there by its own step along rays, where that
-    finds a disc of about ``diameter`` at the place (a measurement that draws an outline, over a reason)."""
-    if isinstance(m, Measurement) and m.reason is None:
-        return m
-    if rays_after is not None and (m if isinstance(m, str) else m.reason) not in rays_after:
-        return m
-    # Where one level does not outline it (a faint disc over haze and its neighbours' light, discs
-    # that overlap, a bright centre), the disc's own edge along rays from the place may.
-    stepped = measure_rays(luminance, clipped, xy, diameter, MIN_NOISE, min_diameter_px)
-    if isinstance(stepped, Measurement) and _near_place(stepped, xy, diameter) and \
-            (stepped.reason is None or isinstance(m, str)):
-        return stepped
-    return m
-
-
-def _near_place(m: Measurement, xy, diameter: float) -> bool:
-    """The measurement is of a disc of about ``diameter`` at ``xy`` (within twice or half the size,
-    its centre within half the diameter)."""
-    return abs(math.log(m.diameter_px / diameter)) <= math.log(2.0) and \
-        math.hypot(m.center_xy[0] - xy[0], m.center_xy[1] - xy[1]) <= 0.5 * diameter
-
-
-def _contour_at_place(luminance, clipped, xy, diameter: float, min_diameter_px: float) -> Measurement | str:
-    """The contour measurement at a place (:func:`bokehfit.discs.measure.measure_candidate`), the part
-    of its cluster closest to the place, or a reason."""
-    m = measure_candidate(luminance, clipped, xy, diameter, 0.5 * diameter, MIN_NOISE, min_diameter_px)
-    if isinstance(m, str):
-        return m
-    parts = [m] + (split_cluster(m) if m.overlaps and m.diameter_px >= 2.0 * RESOLVABLE_PX else [])
-    m = min(parts, key=lambda p: math.hypot(p.center_xy[0] - xy[0], p.center_xy[1] - xy[1]) / diameter
-            + abs(math.log(p.diameter_px / diameter)))
-    if not _near_place(m, xy, diameter):
-        return (f"the outline measured there ({m.diameter_px:.0f} px at {m.center_xy[0]:.0f},"
-                f" {m.center_xy[1]:.0f}) is not a disc of about {diameter:.0f} px")
-    return m
-
-
-def _by_own_steps(luminance, clipped, measurements: list[Measurement], min_diameter_px: float) -> list[Measurement]:
-    """The measurements, those whose contour runs into other discs' light over more than MIN_FIT_SEEN
-    of it (but shows MIN_OUTLINE_SEEN of it as its own: a disc, not a merged glow) measured again by
-    their own step along rays (:func:`bokehfit.discs.rays.measure_rays`), where
-    that finds the same disc and sees more of its edge (light adds: the step of a disc's edge is its
-    own inside a neighbour's light, where a contour through the sum of both is neither's)."""
-    measurements = _distinct_measurements(measurements)
-    own, _ = _own_outlines(measurements)
-    again = list(measurements)
-    for i, (m, reliable) in enumerate(zip(measurements, own)):
-        if m.own_step or not len(reliable) or not MIN_OUTLINE_SEEN <= reliable.mean() < MIN_FIT_SEEN \
-                or m.diameter_px < RESOLVABLE_PX:
-            continue  # only a disc whose contour shows at least half its outline as its own
-        stepped = measure_rays(luminance, clipped, m.center_xy, m.diameter_px, MIN_NOISE, min_diameter_px)
-        if isinstance(stepped, Measurement) and stepped.reason is None and _near_place(stepped, m.center_xy, m.diameter_px) \
-                and _same_size(stepped.diameter_px, m.diameter_px) and stepped.outline_reliable.mean() > reliable.mean():
-            again[i] = stepped
-    return again
