@@ -285,7 +285,7 @@ def test_overlapping_saturated_discs_are_fitted_from_their_own_parts():
 def test_a_disc_crossed_by_a_bar_is_fitted_with_the_bar_left_out(name):
     """The renders' in-focus bars cross a disc: fitted alone, that disc gives the blades and the angle."""
     from bokehfit.fit import fit_aperture
-    from bokehfit.fit.pixels import crop_disc
+    from bokehfit.fit.crop import crop_disc
 
     render = _truth()["renders"][name]
     photo = load_photo(DATA / render["files"][0]["file"])

@@ -27,7 +27,7 @@ from bokehfit.apertures import make_aperture
 from bokehfit.discs import find_discs
 from bokehfit.errors import InputError
 from bokehfit.fit import FitFailedError, fit_aperture
-from bokehfit.fit.pixels import crop_disc
+from bokehfit.fit.crop import crop_disc
 from bokehfit.fit.signature import misalignment_deg
 from bokehfit.io import load_photo
 from bokehfit.metrics import angle_error

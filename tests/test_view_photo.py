@@ -356,7 +356,8 @@ def test_page_draws_the_matched_kernel_with_the_wgsl_renderer(browser, server, a
     from PIL import Image
 
     from bokehfit.apertures import make_aperture
-    from bokehfit.fit.pixels import field_position, model_window
+    from bokehfit.fit.crop import field_position
+    from bokehfit.fit.pixels import model_window
     from bokehfit.kernels import render_kernel
     from bokehfit.view import settings_from_compare
     from test_view import _need

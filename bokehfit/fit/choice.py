@@ -16,7 +16,7 @@ from bokehfit.discs import MIN_FIT_SEEN, USABLE_EVIDENCE, Disc
 from bokehfit.fit.agreement import ELONGATED_ANGLE_SPREAD_DEG, ELONGATED_ASPECT_SPREAD, MIN_ELONGATED_DISCS
 from bokehfit.fit.families import Family
 from bokehfit.fit.features import VIGNETTING_MIN_FIELD
-from bokehfit.fit.pixels import field_position
+from bokehfit.fit.crop import field_position
 from bokehfit.fit.signature import Ellipse, Screen, fit_ellipse, screen
 from bokehfit.metrics import angle_error
 

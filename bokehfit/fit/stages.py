@@ -31,7 +31,8 @@ from bokehfit.fit.agreement import combine, consensus_start, disagreeing, outlin
 from bokehfit.fit.choice import choose_discs, slit_aspect
 from bokehfit.fit.families import FAMILIES, Family
 from bokehfit.fit.features import FEATURE_DELTA_BIC, MIN_RIM, add_feature, at_bound, features_to_test
-from bokehfit.fit.pixels import DiscCrop, JointFit, PixelFit, crop_disc, fit_discs
+from bokehfit.fit.crop import DiscCrop, crop_disc
+from bokehfit.fit.pixels import JointFit, PixelFit, fit_discs
 from bokehfit.fit.result import CandidateModel, DiscFit, FitOptions
 from bokehfit.fit.signature import Screen, screen
 
