@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from bokehfit.discs import MIN_NOISE, measure_discs_at
+from bokehfit.discs import measure_discs_at
 from bokehfit.discs.measure import measure_candidate
+from bokehfit.discs.places import MIN_NOISE
 from bokehfit.discs.rays import measure_rays, pixel_noise
 
 SUPERSAMPLE = 4
@@ -198,14 +199,14 @@ def test_the_search_measures_a_bright_centre_blob_by_its_step(radius, seed, monk
     """The blob's half-peak region is its core; one level between its peak and the ground runs along the
     shoulder, whose fall is as wide as the disc ("soft edge"), and the contour finds no disc. The disc's
     own step at its edge is sharp: measured along rays, the blob is the disc at its edge."""
-    import bokehfit.discs as discs
+    from bokehfit.discs import search
 
     shape, centre = (160, 160), (80.3, 79.6)
     image = _bright_centre_disc(shape, centre, radius, seed)
-    monkeypatch.setattr(discs, "BLOB_RAYS_MIN_DIAMETER_PX", math.inf)
-    assert not [d for d in discs.find_discs(image, None, min_diameter_px=8).discs if d.usable]  # the contour alone
+    monkeypatch.setattr(search, "BLOB_RAYS_MIN_DIAMETER_PX", math.inf)
+    assert not [d for d in search.find_discs(image, None, min_diameter_px=8).discs if d.usable]  # the contour alone
     monkeypatch.undo()
-    usable = [d for d in discs.find_discs(image, None, min_diameter_px=8).discs if d.usable]
+    usable = [d for d in search.find_discs(image, None, min_diameter_px=8).discs if d.usable]
     assert len(usable) == 1, [(d.center_xy, d.diameter_px) for d in usable]
     assert abs(usable[0].diameter_px / (2 * radius) - 1) < 0.08, usable[0].diameter_px
     assert math.hypot(usable[0].center_xy[0] - centre[0], usable[0].center_xy[1] - centre[1]) < 1.0

@@ -22,38 +22,37 @@ point. Discs whose outlines overlap share a ``cluster`` id; the part of each
 outline that runs inside another disc is not its own. Every measured candidate
 that was not kept is listed in ``rejections`` with the reason
 (``rejected_because``), and counted in ``rejected``.
+
+The package is in rooms of one job: :mod:`bokehfit.discs.search` (:func:`find_discs` in named
+steps, its limits), :mod:`bokehfit.discs.places` (:func:`measure_discs_at`, a person's places, and
+the measurement at a place with its fallback along rays), :mod:`bokehfit.discs.disc` (the types
+of the result, the checks of the inputs, and the making of discs from measurements); the
+measurement of one candidate is :mod:`bokehfit.discs.measure`'s. This module imports and names
+the public API. The constants are read at call time from the modules that hold them, not from
+this one: a test that sets one sets it there (``bokehfit.discs.search.BLOB_RAYS_MIN_DIAMETER_PX``).
 """
 
-from __future__ import annotations
-
-import math
-import time
-from collections import Counter
-
-import cv2
-import numpy as np
-from scipy.spatial import cKDTree
-
-from bokehfit.discs.candidates import LARGE_DISC_PX, Candidate, find_candidates
-from bokehfit.discs.circles import find_circles
 from bokehfit.discs.disc import (
     FULL_OUTLINE_SEEN,
     MAX_LUMINANCE,
     MIN_FIT_SEEN,
     MIN_IMAGE_SIDE_PX,
     MIN_OUTLINE_SEEN,
-    SAME_DISC_CENTRE_REL,
     USABLE_EVIDENCE,
     Disc,
     DiscSearch,
     Rejection,
-    _check_image,
-    _check_parameters,
-    _discs_of,
-    _same_size,
 )
-from bokehfit.discs.measure import RESOLVABLE_PX, Measurement, measure_candidate, split_cluster
-from bokehfit.discs.places import MIN_NOISE, _by_own_steps, _by_rays_after, _measure_place, measure_discs_at
+from bokehfit.discs.places import measure_discs_at
+from bokehfit.discs.search import (
+    COMPARE_MIN_DIAMETER_PX,
+    DEFAULT_MAX_DIAMETER_PX,
+    DEFAULT_MIN_DIAMETER_PX,
+    MAX_CANDIDATES,
+    MAX_CLUSTER_CANDIDATES,
+    MAX_LARGE_CANDIDATES,
+    find_discs,
+)
 
 __all__ = [
     "Disc",
@@ -74,228 +73,3 @@ __all__ = [
     "MIN_FIT_SEEN",
     "USABLE_EVIDENCE",
 ]
-
-#: Smallest disc the detector seeks by default (``bokehfit discs``): glints from 4 px are counted.
-DEFAULT_MIN_DIAMETER_PX = 4.0
-#: Smallest disc ``compare`` seeks by default: the smallest that shows its shape (RESOLVABLE_PX).
-#: Smaller glints say nothing of the aperture, and seeking them is most of the search's work on
-#: a large photo (their band is searched at full resolution, and there are thousands of them).
-COMPARE_MIN_DIAMETER_PX = RESOLVABLE_PX
-DEFAULT_MAX_DIAMETER_PX = 500.0
-#: Most candidates measured per photo (the clearest first); the rest are counted as rejected.
-#: A measurement takes about 1–3 ms, so this bounds the measuring to a few seconds.
-MAX_CANDIDATES = 2000
-#: Of those, up to this many candidates of LARGE_DISC_PX or more are measured first whatever
-#: their clarity: a large faint disc has a low peak over the noise, yet thousands of small
-#: glints must not crowd it out. Large candidates are few (one per disc area of the frame).
-MAX_LARGE_CANDIDATES = MAX_CANDIDATES // 10
-#: Most cluster candidates measured (the clearest first): each is measured as a whole and split,
-#: a few times the work of a disc, and most blobs of a busy photo are one disc with its glow.
-MAX_CLUSTER_CANDIDATES = MAX_CANDIDATES // 20
-#: A circle through edges found by the search itself (no person vouching for it) is measured along
-#: rays only where the contour found too little contrast there: where the contour finds no outline or a
-#: soft one, the rays' closed path in a photo's own search took merged glows and lit texture for discs
-#: (the reference photos' labels: 5 of 8 such discs used by the fit were not discs).
-RAYS_AFTER = ("faint",)
-#: ... and from this size (px): the step's sides are then 5 px or more (under 64 px, at their 3-px floor,
-#: JPEG's 8-px blocks and texture make steps as clear as a small faint disc's).
-RAYS_MIN_DIAMETER_PX = 64.0
-#: A blob (light above its surround) whose contour the measurement draws but calls faint or soft-edged
-#: is measured again by its own step along rays: a bright-centre disc, or one over its own glow or its
-#: neighbours' light, has a step at its edge that no one level between its peak and its surround
-#: follows. Not where the contour draws no outline: there the rays' closed path took broad glows for
-#: discs (the reference photos' labels: two glows of 350 px used by the fit, one photo's answer wrong).
-#: Unlike a circle through edges, a blob is light standing out of its surround, so its step is sought from ...
-BLOB_RAYS_AFTER = ("faint", "soft edge")
-#: ... this size (px): the step's sides (3 px, beginning 1.5 px from the edge) then lie inside the disc.
-BLOB_RAYS_MIN_DIAMETER_PX = 2.0 * RESOLVABLE_PX
-#: Most circles through edges measured per photo (module bokehfit.discs.circles; the clearest first).
-MAX_CIRCLES = MAX_CANDIDATES // 10
-
-
-def _distinct(candidates: list[Candidate]) -> list[Candidate]:
-    """Strongest first; drop a candidate that repeats a stronger one (same place, similar size).
-    Cluster candidates repeat only each other: a cluster and its brightest disc are both kept."""
-    kinds = [[c for c in candidates if c.cluster == cluster] for cluster in (False, True)]
-    if all(kinds):
-        return sorted(_distinct(kinds[0]) + _distinct(kinds[1]), key=lambda c: -c.strength)
-    kept: list[Candidate] = []
-    if not candidates:
-        return kept
-    order = sorted(candidates, key=lambda c: -c.strength)
-    centres = np.array([c.center_xy for c in order])
-    tree = cKDTree(centres)
-    taken = np.zeros(len(order), dtype=bool)
-    for i, c in enumerate(order):
-        if taken[i]:
-            continue
-        kept.append(c)
-        for j in tree.query_ball_point(c.center_xy, 0.5 * c.diameter_px + 1.0):
-            if 0.4 <= order[j].diameter_px / c.diameter_px <= 2.5:
-                taken[j] = True
-    return kept
-
-
-class _OutlineGrid:
-    """Measured outlines filed by the grid cells their bounding boxes cover, for point look-ups."""
-
-    def __init__(self, cell_px: float):
-        self._cell = float(cell_px)
-        self._cells: dict[tuple[int, int], list[tuple[np.ndarray, tuple[float, float, float, float]]]] = {}
-
-    def add(self, outline: np.ndarray) -> None:
-        x0, y0 = outline.min(axis=0)
-        x1, y1 = outline.max(axis=0)
-        entry = (outline.astype(np.float32), (float(x0), float(y0), float(x1), float(y1)))
-        for gx in range(math.floor(x0 / self._cell), math.floor(x1 / self._cell) + 1):
-            for gy in range(math.floor(y0 / self._cell), math.floor(y1 / self._cell) + 1):
-                self._cells.setdefault((gx, gy), []).append(entry)
-
-    def contains(self, point: tuple[float, float]) -> bool:
-        """True when ``point`` lies inside (or on) one of the outlines."""
-        x, y = point
-        for outline, (x0, y0, x1, y1) in self._cells.get((math.floor(x / self._cell), math.floor(y / self._cell)), ()):
-            if x0 <= x <= x1 and y0 <= y <= y1 and cv2.pointPolygonTest(outline, (float(x), float(y)), False) >= 0:
-                return True
-        return False
-
-
-def find_discs(
-    luminance: np.ndarray,
-    clipped: np.ndarray | None = None,
-    *,
-    min_diameter_px: float = DEFAULT_MIN_DIAMETER_PX,
-    max_diameter_px: float = DEFAULT_MAX_DIAMETER_PX,
-    max_discs: int | None = None,
-    progress: bool = False,
-) -> DiscSearch:
-    """Find the bokeh discs of a linear-light image.
-
-    Parameters
-    ----------
-    luminance : ndarray of shape (M, N), float32
-        Linear light (1.0 = white).
-    clipped : ndarray of shape (M, N), bool, optional
-        Pixels clipped in the source; discs containing them are flagged ``saturated``.
-    min_diameter_px, max_diameter_px : float
-        Range of equal-area diameters sought.
-    max_discs : int, optional
-        Keep the largest ``max_discs`` discs.
-    progress : bool
-        Show a progress bar while measuring many candidates.
-
-    Returns
-    -------
-    DiscSearch
-        Discs sorted by diameter, largest first; falsy with ``reason`` if none.
-    """
-    start = time.perf_counter()
-    luminance = _check_image(luminance)
-    clipped, min_diameter_px, max_diameter_px, max_discs = _check_parameters(
-        luminance.shape, clipped, min_diameter_px, max_diameter_px, max_discs
-    )
-    # No disc is larger than the frame's diagonal: that is also what max_diameter_px=inf means.
-    search_max_px = min(max_diameter_px, max(math.hypot(*luminance.shape), 2.0 * min_diameter_px))
-    candidates = _distinct(find_candidates(luminance, min_diameter_px, search_max_px))
-    rejected: Counter = Counter()
-    notes: list[str] = []
-    clusters = [c for c in candidates if c.cluster]
-    if len(clusters) > MAX_CLUSTER_CANDIDATES:
-        dropped = {id(c) for c in clusters[MAX_CLUSTER_CANDIDATES:]}  # clearest first, as _distinct sorts them
-        candidates = [c for c in candidates if id(c) not in dropped]
-        rejected["beyond the cluster limit"] = len(dropped)
-        notes.append(
-            f"{len(clusters)} possible clusters of overlapping discs, the {MAX_CLUSTER_CANDIDATES} clearest split"
-            " (limit MAX_CLUSTER_CANDIDATES)"
-        )
-    found = len(candidates)
-    if found > MAX_CANDIDATES:
-        rejected["beyond the candidate limit"] = found - MAX_CANDIDATES
-        # _distinct sorts them clearest first; the large ones go first, up to their quota, then
-        # those large enough to show their shape (RESOLVABLE_PX), then the smaller ones.
-        large = [c for c in candidates if c.diameter_px >= LARGE_DISC_PX][:MAX_LARGE_CANDIDATES]
-        taken = {id(c) for c in large}
-        rest = sorted((c for c in candidates if id(c) not in taken), key=lambda c: c.diameter_px < RESOLVABLE_PX)
-        candidates = large + rest[: MAX_CANDIDATES - len(large)]
-        notes.append(
-            f"{found} candidates found, the {MAX_CANDIDATES} clearest measured (limit MAX_CANDIDATES);"
-            " raise min_diameter_px or crop the photo to measure the others"
-        )
-    candidates.sort(key=lambda c: -c.diameter_px)  # a larger disc claims the candidates inside it
-    iterator = candidates
-    if progress and len(candidates) > 200:
-        from tqdm import tqdm
-
-        iterator = tqdm(candidates, desc="measuring discs", unit="candidate", leave=False)
-    grid = _OutlineGrid(max(16.0, 4.0 * min_diameter_px))
-    measurements: list[Measurement] = []
-    rejections: list[Rejection] = []
-    for candidate in iterator:
-        reason, where, size = None, candidate.center_xy, candidate.diameter_px
-        if grid.contains(candidate.center_xy):
-            reason = "inside a larger disc"
-        else:
-            args = (luminance, clipped, candidate.center_xy, candidate.diameter_px, candidate.extent_px, MIN_NOISE)
-            if candidate.cluster:
-                m = measure_candidate(*args, min_diameter_px, cluster=True)
-                parts = [] if isinstance(m, str) else split_cluster(m)
-                parts = [p for p in parts if min_diameter_px <= p.diameter_px <= max_diameter_px]
-                if parts:
-                    measurements.extend(parts)
-                    grid.add(m.outline_xy)
-                else:  # one disc with its glow: its own candidate measures it
-                    rejected["not a cluster"] += 1
-                    rejections.append(Rejection(candidate.center_xy, candidate.diameter_px, "not a cluster"))
-                continue
-            m = measure_candidate(*args, min_diameter_px)
-            if isinstance(m, Measurement) and candidate.diameter_px >= BLOB_RAYS_MIN_DIAMETER_PX:
-                m = _by_rays_after(luminance, clipped, m, candidate.center_xy, candidate.diameter_px,
-                                   min_diameter_px, BLOB_RAYS_AFTER)
-            if isinstance(m, str):
-                reason = m
-            else:
-                where, size = m.center_xy, m.diameter_px
-                reason = m.reason if m.reason is not None else ("too large" if m.diameter_px > max_diameter_px else None)
-        if reason is None:
-            # A blob of overlapping discs is measured as its discs, each with the outline it shows.
-            parts = split_cluster(m) if m.overlaps and m.diameter_px >= 2.0 * RESOLVABLE_PX else []
-            measurements.extend(p for p in parts if min_diameter_px <= p.diameter_px <= max_diameter_px)
-            if not parts:
-                measurements.append(m)
-            grid.add(m.outline_xy)
-        else:
-            rejected[reason] += 1
-            rejections.append(Rejection(where, size, reason))
-    found += _circle_discs(luminance, clipped, measurements, min_diameter_px, min(max_diameter_px, search_max_px),
-                           rejected, rejections)
-    measurements = _by_own_steps(luminance, clipped, measurements, min_diameter_px)
-    return _discs_of(measurements, found, rejected, start, notes, rejections, max_discs)
-
-
-def _circle_discs(luminance, clipped, measurements, min_diameter_px, max_diameter_px, rejected, rejections) -> int:
-    """Measure the circles through the photo's edges (:mod:`bokehfit.discs.circles`: overlapping, faint
-    and ring discs that no blob shows) that the blob search did not measure already, as places
-    (:func:`_measure_place`), the clearest MAX_CIRCLES; kept where they pass the measurement's tests
-    of a disc. Returns how many were measured."""
-    places = find_circles(luminance, min_diameter_px, max_diameter_px)[:MAX_CIRCLES]
-    if not places:
-        return 0
-    seen = [(m.center_xy, m.diameter_px) for m in measurements] + [(r.center_xy, r.diameter_px) for r in rejections]
-    known = cKDTree(np.array([xy for xy, _ in seen])) if seen else None
-    measured = 0
-    for xy, diameter in places:
-        if known is not None and any(_same_size(seen[j][1], diameter)
-                                     for j in known.query_ball_point(xy, SAME_DISC_CENTRE_REL * diameter)):
-            continue  # the blob search measured it (a disc, or not one)
-        measured += 1
-        m = _measure_place(luminance, clipped, xy, diameter, min_diameter_px,
-                           rays_after=RAYS_AFTER if diameter >= RAYS_MIN_DIAMETER_PX else ())
-        reason = m if isinstance(m, str) else m.reason
-        if reason is None and not min_diameter_px <= m.diameter_px <= max_diameter_px:
-            reason = "too large"
-        if reason is None:
-            measurements.append(m)
-        else:
-            rejected[reason] += 1
-            rejections.append(Rejection(xy, diameter, reason))
-    return measured
