@@ -44,7 +44,7 @@ from typing import Callable
 
 import numpy as np
 
-from bokehfit.apertures import Aperture, make_aperture
+from bokehfit.apertures import Aperture
 from bokehfit.errors import InputError
 from bokehfit.gpu.runtime import AdapterChoice
 from bokehfit.kernels.accuracy import plan_kernel
@@ -176,22 +176,13 @@ def _clipped_fraction(aperture: Aperture, scale: float, size: int, field_positio
 
 
 def compute_kernel(
-    shape: str | Aperture,
-    angle_deg: float | None = None,
-    diameter_px: float | None = None,
-    size: int | None = None,
+    aperture: Aperture,
+    diameter_px: float,
+    size: int,
     *,
     side: str = "far",
     method: str | None = None,
     samples: int | None = None,
-    blades: int | None = None,
-    aspect: float | None = None,
-    roundness: float | None = None,
-    squeeze: float | None = None,
-    vignetting=None,
-    rim: float | None = None,
-    chromatic=None,
-    mask=None,
     field_position=None,
     sampling: str = "stratified",
     seed: int = 0,
@@ -199,10 +190,10 @@ def compute_kernel(
     adapter: AdapterChoice | None = None,
 ) -> Kernel:
     """Render a kernel and report how: see :func:`render_kernel` for the parameters."""
-    aperture = _aperture(shape, angle_deg, blades=blades, aspect=aspect, roundness=roundness, squeeze=squeeze,
-                         vignetting=vignetting, rim=rim, chromatic=chromatic, mask=mask)
-    if diameter_px is None or size is None:
-        raise InputError(f"{'diameter_px' if diameter_px is None else 'size'} is required")
+    if not isinstance(aperture, Aperture):
+        raise InputError(
+            f"aperture must be an Aperture, built once by bokehfit.apertures.make_aperture (got {aperture!r:.60})"
+        )
     diameter_px = check("diameter_px", diameter_px)
     size = check("kernel_size", size, name="size")
     if side not in SIDES:
@@ -268,34 +259,14 @@ def compute_kernel(
                   transmitted, field_position, max(bounds) if bounds else None)
 
 
-def _aperture(shape, angle_deg, **features) -> Aperture:
-    """The aperture of :func:`compute_kernel`: given as one, or built from its parameters."""
-    given = {name: value for name, value in features.items() if value is not None}
-    if isinstance(shape, Aperture):
-        if angle_deg is not None or given:
-            named = ", ".join(["angle_deg"] * (angle_deg is not None) + list(given))
-            raise InputError(f"give an Aperture or its parameters, not both (got {named} with an Aperture)")
-        return shape
-    return make_aperture(shape, 0.0 if angle_deg is None else angle_deg, **given)
-
-
 def render_kernel(
-    shape: str | Aperture,
-    angle_deg: float | None = None,
-    diameter_px: float | None = None,
-    size: int | None = None,
+    aperture: Aperture,
+    diameter_px: float,
+    size: int,
     *,
     side: str = "far",
     method: str | None = None,
     samples: int | None = None,
-    blades: int | None = None,
-    aspect: float | None = None,
-    roundness: float | None = None,
-    squeeze: float | None = None,
-    vignetting=None,
-    rim: float | None = None,
-    chromatic=None,
-    mask=None,
     field_position=None,
     sampling: str = "stratified",
     seed: int = 0,
@@ -306,12 +277,11 @@ def render_kernel(
 
     Parameters
     ----------
-    shape : str or Aperture
-        Aperture shape (see ``bokehfit.apertures.SHAPES``), or a whole
-        :class:`~bokehfit.apertures.Aperture` (then give no angle or feature;
-        pass ``diameter_px`` and ``size`` by keyword).
-    angle_deg : float
-        Counter-clockwise rotation of the aperture, degrees (design.md §2); default 0.
+    aperture : Aperture
+        The aperture, its shape, angle and real-lens features (design.md §3, §3b)
+        in one :class:`~bokehfit.apertures.Aperture`, built by
+        :func:`bokehfit.apertures.make_aperture`. The kernel takes nothing
+        else of the aperture.
     diameter_px : float
         Diameter of the circle with the disc's area, pixels (equal-area convention).
     size : int
@@ -328,13 +298,6 @@ def render_kernel(
         :attr:`Kernel.method` says which one drew it.
     samples : int, optional
         Point samples over the disc for ``mc`` and ``raster`` (default 2²²).
-    blades, aspect : optional
-        Blade count of an ``ngon``; width/height of a ``slit``.
-    roundness, squeeze, vignetting, rim, chromatic : optional
-        The real-lens features of design.md §3b (see
-        :func:`bokehfit.apertures.make_aperture`; defaults reproduce §3).
-    mask : MaskTable, path or 2-D array, optional
-        The transmission image of shape ``"mask"`` (design.md §3b).
     field_position : (float, float), optional
         The disc's position from the image centre in half-diagonals, y up:
         where the vignetting cuts it (default the centre, (0, 0)). The
@@ -367,26 +330,18 @@ def render_kernel(
 
     Examples
     --------
-    >>> k = render_kernel("hexagon", 20, 64, 128)
+    >>> from bokehfit.apertures import make_aperture
+    >>> k = render_kernel(make_aperture("hexagon", 20), 64, 128)
     >>> k.shape, round(float(k.sum()), 6)
     ((128, 128), 1.0)
     """
     return compute_kernel(
-        shape,
-        angle_deg,
+        aperture,
         diameter_px,
         size,
         side=side,
         method=method,
         samples=samples,
-        blades=blades,
-        aspect=aspect,
-        roundness=roundness,
-        squeeze=squeeze,
-        vignetting=vignetting,
-        rim=rim,
-        chromatic=chromatic,
-        mask=mask,
         field_position=field_position,
         sampling=sampling,
         seed=seed,

@@ -127,7 +127,7 @@ def _channel_time(method: str, aperture: Aperture, diameter_px: float, size: int
     mask = aperture.mask
     if method == "exact" and mask is not None:
         cell_px = mask.cell * diameter_px * math.sqrt(math.pi) / 2.0 * max(aperture.squeeze, 1.0 / aperture.squeeze) ** 0.5
-        return _EXACT_PER_MASK_SEGMENT_PIXEL * mask_border_segments(mask) * (cell_px + 2.0) ** 2
+        return _EXACT_PER_MASK_SEGMENT_PIXEL * mask_border_segments(aperture) * (cell_px + 2.0) ** 2
     if method == "exact" and aperture.rim != 0.0:
         return _EXACT_RIM_PER_PIXEL * size * size
     if method == "exact":

@@ -458,9 +458,9 @@ def _mask_jumps(mask) -> tuple[np.ndarray, np.ndarray]:
     return t[1:, 1:-1] - t[:-1, 1:-1], t[1:-1, :-1] - t[1:-1, 1:]
 
 
-def mask_border_segments(mask) -> int:
-    """How many weighted border segments :func:`mask_coverage` integrates for ``mask`` (a MaskTable): its cost."""
-    jump_h, jump_v = _mask_jumps(mask)
+def mask_border_segments(aperture: Aperture) -> int:
+    """How many weighted border segments :func:`mask_coverage` integrates for a ``mask`` aperture: its cost."""
+    jump_h, jump_v = _mask_jumps(aperture.mask)
     return int(np.count_nonzero(jump_h) + np.count_nonzero(jump_v))
 
 
