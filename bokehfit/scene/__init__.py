@@ -1,16 +1,19 @@
 """The seed's scene: a WGSL path tracer with the thin-lens camera and every aperture.
 
-``render("cornell", shape="hexagon", fstop=1.4, ...)`` path-traces the Cornell
-box of :mod:`bokehfit.scene.cornell` (mirror rear wall, mirror balls, a fine
-floor grid) through the renderer camera of design.md §4;
-``render("points", ...)`` draws point lights at chosen depths on black
+``render("cornell", lens, settings)`` path-traces the Cornell box of
+:mod:`bokehfit.scene.cornell` (mirror rear wall, mirror balls, a fine floor
+grid) through the renderer camera of design.md §4, the :class:`Lens` built by
+:func:`make_lens` around one :class:`~bokehfit.apertures.Aperture`;
+``render("points", lens, settings)`` draws point lights at chosen depths on black
 (:mod:`bokehfit.scene.points`). Both run as WGSL compute shaders through wgpu
 (``shaders/pathtrace.wgsl``, ``shaders/points.wgsl``), written for WebGPU as
 browsers implement it. Scenes are picked by name from ``SCENES``.
 
 Examples
 --------
->>> result = render("points", shape="triangle", fstop=2.0, spp=4, width=64, height=32)  # doctest: +SKIP
+>>> from bokehfit.apertures import make_aperture
+>>> lens = make_lens(make_aperture("triangle"), fstop=2.0, focus_distance_m=0.3)
+>>> result = render("points", lens, make_settings(64, 32, spp=4))  # doctest: +SKIP
 >>> result.image.shape  # doctest: +SKIP
 (32, 64, 3)
 """
@@ -95,62 +98,31 @@ def build_scene(name: str, *, light_depths_m=None) -> Scene | PointScene:
 
 
 def render(
-    scene: str | Scene | PointScene = "cornell",
+    scene: str | Scene | PointScene,
+    lens: Lens,
+    settings: RenderSettings | None = None,
     *,
-    shape: str = "circle",
-    angle_deg: float = 0.0,
-    fstop: float = 2.8,
-    focus_distance_m: float | None = None,
-    blades: int | None = None,
-    aspect: float | None = None,
-    roundness: float = 0.0,
-    squeeze: float = 1.0,
-    vignetting=None,
-    rim: float = 0.0,
-    chromatic=None,
-    mask=None,
-    spp: int = 64,
-    width: int = 512,
-    height: int = 512,
-    seed: int = 0,
     light_depths_m=None,
-    focal_length_mm: float = FOCAL_LENGTH_MM,
-    sensor_width_mm: float = SENSOR_WIDTH_MM,
-    max_tile_pixels: int | None = None,
     progress: Callable[[int], None] | None = None,
     max_time_s: float | None = None,
 ) -> RenderResult:
-    """Validate the parameters and render a scene (by name, or a Scene/PointScene).
+    """Render a scene (by name, or a Scene/PointScene) through ``lens``.
 
     Parameters
     ----------
     scene : str or Scene or PointScene
         ``"cornell"`` or ``"points"`` (see ``SCENES``), or a scene built in Python.
-    shape, angle_deg, blades, aspect : optional
-        The aperture (``bokehfit.apertures.make_aperture``).
-    roundness, squeeze, vignetting, rim, chromatic : optional
-        Its real-lens features (design.md §3b; ``make_aperture`` takes them
-        the same way): rounded blades, anamorphic squeeze, cat-eye vignetting
-        ``{radius, shift}``, intensity profile, longitudinal colour ``{red, blue}``.
-    mask : MaskTable, path or 2-D array, optional
-        The transmission image of shape ``"mask"`` (design.md §3b), sampled by
-        both renderers from its CDF tables.
-    fstop : float
-        Equal-area f-stop: the aperture has the area of a circle of diameter f/N.
-    focus_distance_m : float, optional
-        Distance of the focus plane along the view axis (default: the scene's).
-    spp : int
-        Samples per pixel (points: aperture samples per pixel of each disc).
-    width, height : int
-        Image size in pixels; larger images are rendered in tiles.
-    seed : int
-        The same seed gives the same image.
+    lens : Lens
+        The aperture (one :class:`~bokehfit.apertures.Aperture`, with its
+        real-lens features of design.md §3b), f-stop, focus distance, focal
+        length and sensor width, built by :func:`make_lens`. A scene's own
+        focus distance is ``build_scene(name).default_focus_m``.
+    settings : RenderSettings, optional
+        Image size, samples per pixel (points: aperture samples per pixel of
+        each disc), seed and tiling, built by :func:`make_settings`; default
+        512×512 pixels, 64 spp, seed 0. Larger images are rendered in tiles.
     light_depths_m : sequence of float, optional
-        Depths of the point lights of ``points`` (``inf`` allowed).
-    focal_length_mm, sensor_width_mm : float
-        Lens and sensor (default 35 mm on 36 mm).
-    max_tile_pixels : int, optional
-        Most pixels per tile (default: the adapter's limit, at most 2²²).
+        Depths of the point lights of ``points`` given by name (``inf`` allowed).
     progress : callable, optional
         Called with the number of samples finished, now and then.
     max_time_s : float, optional
@@ -168,29 +140,18 @@ def render(
     InputError
         Naming the bad parameter.
     """
+    if not isinstance(lens, Lens):
+        raise InputError(f"lens must be a Lens, built by bokehfit.scene.make_lens (got {lens!r:.60})")
+    if settings is None:
+        settings = make_settings(512, 512, 64)
+    elif not isinstance(settings, RenderSettings):
+        raise InputError(f"settings must be RenderSettings, built by bokehfit.scene.make_settings (got {settings!r:.60})")
     if isinstance(scene, (Scene, PointScene)):
         if light_depths_m is not None:
             raise InputError("light_depths_m applies only to a scene given by name")
         built = scene
     else:
         built = build_scene(scene, light_depths_m=light_depths_m)
-    lens = make_lens(
-        shape,
-        angle_deg,
-        fstop=fstop,
-        focus_distance_m=built.default_focus_m if focus_distance_m is None else focus_distance_m,
-        blades=blades,
-        aspect=aspect,
-        roundness=roundness,
-        squeeze=squeeze,
-        vignetting=vignetting,
-        rim=rim,
-        chromatic=chromatic,
-        mask=mask,
-        focal_length_mm=focal_length_mm,
-        sensor_width_mm=sensor_width_mm,
-    )
-    settings = make_settings(width, height, spp, seed, max_tile_pixels=max_tile_pixels)
     if max_time_s is not None:
         max_time_s = check("max_time_s", max_time_s)
         if total_work(built, lens, settings) > QUICK_WORK:

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bokehfit.apertures import Aperture, Chromatic, Vignetting, make_aperture
+from bokehfit.apertures import Aperture
 from bokehfit.errors import InputError
 from bokehfit.optics import coc_mm
 from bokehfit.validate import RANGES, check
@@ -117,30 +117,19 @@ class Lens:
 
 
 def make_lens(
-    shape: str = "circle",
-    angle_deg: float = 0.0,
+    aperture: Aperture,
     *,
     fstop: float,
     focus_distance_m: float,
-    blades: int | None = None,
-    aspect: float | None = None,
-    roundness: float = 0.0,
-    squeeze: float = 1.0,
-    vignetting: Vignetting | dict | None = None,
-    rim: float = 0.0,
-    chromatic: Chromatic | dict | None = None,
-    mask=None,
     focal_length_mm: float = FOCAL_LENGTH_MM,
     sensor_width_mm: float = SENSOR_WIDTH_MM,
 ) -> Lens:
-    """Validate the lens parameters and build a :class:`Lens`.
+    """Validate the lens parameters and build a :class:`Lens` around ``aperture``.
 
-    The numbers must lie in the ranges of ``bokehfit.validate.RANGES``, and
-    the focus distance beyond the focal length. ``roundness``, ``squeeze``,
-    ``vignetting``, ``rim``, ``chromatic`` and ``mask`` (the transmission image
-    of shape ``mask``: a PNG path, an array or a ``MaskTable``) are the
-    real-lens features of design.md §3b, as :func:`bokehfit.apertures.make_aperture`
-    takes them.
+    The aperture (its shape, angle and the real-lens features of design.md §3b)
+    is one :class:`~bokehfit.apertures.Aperture`, built and checked by
+    :func:`bokehfit.apertures.make_aperture`. The numbers must lie in the ranges
+    of ``bokehfit.validate.RANGES``, and the focus distance beyond the focal length.
 
     Raises
     ------
@@ -149,14 +138,15 @@ def make_lens(
 
     Examples
     --------
-    >>> lens = make_lens("hexagon", 20, fstop=1.4, focus_distance_m=0.7)
+    >>> from bokehfit.apertures import make_aperture
+    >>> lens = make_lens(make_aperture("hexagon", 20), fstop=1.4, focus_distance_m=0.7)
     >>> round(lens.aperture_diameter_mm, 2)
     25.0
     """
-    aperture = make_aperture(
-        shape, angle_deg, blades=blades, aspect=aspect, roundness=roundness, squeeze=squeeze,
-        vignetting=vignetting, rim=rim, chromatic=chromatic, mask=mask,
-    )
+    if not isinstance(aperture, Aperture):
+        raise InputError(
+            f"aperture must be an Aperture, built once by bokehfit.apertures.make_aperture (got {aperture!r:.60})"
+        )
     fstop = check("fstop", fstop)
     focus = check("focus_distance_m", focus_distance_m)
     focal = check("focal_length_mm", focal_length_mm)
