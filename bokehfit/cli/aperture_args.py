@@ -1,17 +1,52 @@
 """The command-line options of the real-lens aperture features (design.md §3b), in one place.
 
 ``kernel``, ``render`` and ``similarity`` (once per side) take the same options
-with the same checks, ranges and help; values go to the aperture model as given.
+with the same checks, ranges and help; values go to the aperture model as given,
+and :func:`aperture_from_args` builds the one :class:`~bokehfit.apertures.Aperture`
+each command passes on.
 """
 
 from __future__ import annotations
 
 import argparse
 
+from bokehfit.apertures import Aperture, Chromatic, Vignetting, make_aperture
 from bokehfit.apertures.mask import MAX_MASK_SIDE
 from bokehfit.cli.arg_types import arg_type, interval, pair_arg
 
-__all__ = ["add_feature_arguments"]
+__all__ = ["add_feature_arguments", "aperture_from_args"]
+
+
+def aperture_from_args(args: argparse.Namespace, side: str = "") -> Aperture:
+    """The aperture of a command's options, built once by :func:`~bokehfit.apertures.make_aperture`.
+
+    Reads ``shape``, ``angle``, ``blades``, ``aspect`` and the options of
+    :func:`add_feature_arguments`; ``side`` (e.g. ``"a"``) reads one side of a
+    comparison (``shape_a``, ``angle_a``, ...). An option the command lacks
+    (``similarity`` has no ``--rim``) is at the model's default.
+
+    Raises
+    ------
+    InputError
+        From ``make_aperture``, naming the parameter.
+    """
+
+    def value(name: str, default=None):
+        return getattr(args, f"{name}_{side}" if side else name, default)
+
+    vignetting, chromatic = value("vignetting"), value("chromatic")
+    return make_aperture(
+        value("shape"),
+        value("angle", 0.0),
+        blades=value("blades"),
+        aspect=value("aspect"),
+        roundness=value("roundness", 0.0),
+        squeeze=value("squeeze", 1.0),
+        vignetting=None if vignetting is None else Vignetting(*vignetting),
+        rim=value("rim", 0.0),
+        chromatic=None if chromatic is None else Chromatic(*chromatic),
+        mask=value("mask"),
+    )
 
 
 def add_feature_arguments(

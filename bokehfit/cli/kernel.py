@@ -6,12 +6,12 @@ import argparse
 
 import numpy as np
 
-from bokehfit.apertures import SHAPES, Chromatic, Vignetting
+from bokehfit.apertures import SHAPES
 from bokehfit.kernels import DEFAULT_SAMPLES, METHODS, SAMPLINGS, SIDES, Kernel, compute_kernel
 from bokehfit.kernels.accuracy import MIN_TOLERANCE
 from bokehfit.errors import InputError
 from bokehfit.outputs import KERNEL_FORMATS, check_output_path, write_exr, write_kernel_image, write_png
-from bokehfit.cli.aperture_args import add_feature_arguments
+from bokehfit.cli.aperture_args import add_feature_arguments, aperture_from_args
 from bokehfit.cli.arg_types import arg_type, interval, pair_arg, shape_arg
 
 __all__ = ["add_parser", "run"]
@@ -81,21 +81,12 @@ def run(args: argparse.Namespace) -> Kernel:
     if args.field_position is not None and args.vignetting is None:
         raise InputError("--field-position applies only with --vignetting (the kernel is the same everywhere without it)")
     kernel = compute_kernel(
-        args.shape,
-        args.angle,
+        aperture_from_args(args),
         args.diameter_px,
         args.size,
         side=args.side,
         method=args.method,
         samples=args.samples,
-        blades=args.blades,
-        aspect=args.aspect,
-        roundness=args.roundness,
-        squeeze=args.squeeze,
-        vignetting=None if args.vignetting is None else Vignetting(*args.vignetting),
-        rim=args.rim,
-        chromatic=None if args.chromatic is None else Chromatic(*args.chromatic),
-        mask=args.mask,
         field_position=args.field_position,
         sampling=args.sampling,
         seed=args.seed,

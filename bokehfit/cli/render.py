@@ -28,7 +28,7 @@ from bokehfit.scene import (
     write_render,
 )
 from bokehfit.scene.renderer import QUICK_WORK, estimate_render_s
-from bokehfit.cli.aperture_args import add_feature_arguments
+from bokehfit.cli.aperture_args import add_feature_arguments, aperture_from_args
 from bokehfit.cli.arg_types import arg_type, interval, shape_arg
 
 __all__ = ["add_parser", "run", "parse_size", "check_render_memory", "estimate_write_s", "RENDER_BYTES_PER_PIXEL"]
@@ -190,18 +190,9 @@ def run(args: argparse.Namespace) -> RenderResult:
     depths = parse_depths(args.light_depths) if args.light_depths is not None else None
     scene = build_scene(args.scene, light_depths_m=depths)
     lens = make_lens(
-        args.shape,
-        args.angle,
+        aperture_from_args(args),
         fstop=args.fstop,
         focus_distance_m=scene.default_focus_m if args.focus_distance is None else args.focus_distance,
-        blades=args.blades,
-        aspect=args.aspect,
-        roundness=args.roundness,
-        squeeze=args.squeeze,
-        vignetting=None if args.vignetting is None else dict(zip(("radius", "shift"), args.vignetting)),
-        rim=args.rim,
-        chromatic=None if args.chromatic is None else dict(zip(("red", "blue"), args.chromatic)),
-        mask=args.mask,
     )
     settings = make_settings(width, height, args.spp, args.seed)
     check_render_memory(width, height)

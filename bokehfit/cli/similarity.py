@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 
 from bokehfit import __version__
-from bokehfit.apertures import SHAPES, Aperture, Vignetting, make_aperture
-from bokehfit.cli.aperture_args import add_feature_arguments
+from bokehfit.apertures import SHAPES, Aperture
+from bokehfit.cli.aperture_args import add_feature_arguments, aperture_from_args
 from bokehfit.cli.arg_types import pair_arg
 from bokehfit.errors import InputError
 from bokehfit.metrics import METRICS, angle_error, aperture_outline, best_rotation_deg, compare_outlines
@@ -54,18 +54,7 @@ def _aperture(args: argparse.Namespace, side: str) -> Aperture:
     if getattr(args, f"field_position_{side}") is not None and vignetting is None:
         raise InputError(f"--field-position-{side} applies only with --vignetting-{side} (got no vignetting)")
     try:
-        features = {
-            name: getattr(args, f"{name}_{side}") for name in ("roundness", "squeeze") if getattr(args, f"{name}_{side}") is not None
-        }
-        return make_aperture(
-            getattr(args, f"shape_{side}"),
-            getattr(args, f"angle_{side}"),
-            blades=getattr(args, f"blades_{side}"),
-            aspect=getattr(args, f"aspect_{side}"),
-            vignetting=None if vignetting is None else Vignetting(*vignetting),
-            mask=getattr(args, f"mask_{side}"),
-            **features,
-        )
+        return aperture_from_args(args, side)
     except InputError as error:
         # make_aperture's messages open with the parameter's name: give the option's.
         message = str(error)

@@ -41,6 +41,7 @@ from bokehfit.view.wgsl import (
 __all__ = [
     "COC_DIVISOR",
     "DepthOfField",
+    "aperture_for_query",
     "depth_of_field",
     "params_for_query",
     "settings_from_compare",
@@ -281,18 +282,18 @@ def _query_mask(query: dict, masks: MaskStore | None) -> MaskTable:
     return (masks or MaskStore()).get(values[-1])
 
 
-def params_for_query(query: dict, scene_name: str = "cornell", masks: MaskStore | None = None) -> dict:
-    """``/params.json``: the uniform values, lens and depth of field for the page's settings.
+def aperture_for_query(query: dict, masks: MaskStore | None = None) -> Aperture:
+    """The aperture of the page's settings, built once by :func:`~bokehfit.apertures.make_aperture`.
 
     ``query`` maps names to lists of strings (as from :func:`urllib.parse.parse_qs`):
-    shape, angle (degrees), fstop, focus (m), blades (ngon), aspect (slit), width, height,
-    and the §3b features: roundness (n-gons), squeeze, rim, vignetting_radius with
-    vignetting_shift (both, or neither: no vignetting), chromatic_red with chromatic_blue,
-    and for shape ``mask`` the digest of a mask uploaded to ``masks``.
+    shape, angle (degrees), blades (ngon), aspect (slit), and the §3b features:
+    roundness (n-gons), squeeze, rim, vignetting_radius with vignetting_shift
+    (both, or neither: no vignetting), chromatic_red with chromatic_blue, and for
+    shape ``mask`` the digest of a mask uploaded to ``masks``.
     """
-    scene = build_scene(scene_name)
     shape = (query.get("shape") or ["circle"])[-1]
     spec = SHAPES.get(shape)
+    angle = _query_number(query, "angle", 0.0)
     pairs = {}
     for pair, keys in (("vignetting", ("radius", "shift")), ("chromatic", ("red", "blue"))):
         values = {key: _query_number(query, f"{pair}_{key}") for key in keys}
@@ -301,11 +302,9 @@ def params_for_query(query: dict, scene_name: str = "cornell", masks: MaskStore 
             missing = next(key for key in keys if key not in given)
             raise InputError(f"{pair}_{missing} must be given with {pair}_{given[0]}")
         pairs[pair] = values if given else None
-    lens = make_lens(
+    return make_aperture(
         shape,
-        _query_number(query, "angle", 0.0),
-        fstop=_query_number(query, "fstop", 2.8),
-        focus_distance_m=_query_number(query, "focus", scene.default_focus_m),
+        angle,
         blades=query_int(query, "blades") if spec is not None and spec.takes_blades else None,
         aspect=_query_number(query, "aspect") if spec is not None and spec.takes_aspect else None,
         roundness=_query_number(query, "roundness", 0.0) if spec is not None and spec.rounds else 0.0,
@@ -313,6 +312,21 @@ def params_for_query(query: dict, scene_name: str = "cornell", masks: MaskStore 
         rim=_query_number(query, "rim", 0.0),
         mask=_query_mask(query, masks) if spec is not None and spec.tabulated else None,
         **pairs,
+    )
+
+
+def params_for_query(query: dict, scene_name: str = "cornell", masks: MaskStore | None = None) -> dict:
+    """``/params.json``: the uniform values, lens and depth of field for the page's settings.
+
+    ``query`` maps names to lists of strings (as from :func:`urllib.parse.parse_qs`):
+    fstop, focus (m), width, height, and the aperture's settings of
+    :func:`aperture_for_query`.
+    """
+    scene = build_scene(scene_name)
+    lens = make_lens(
+        aperture_for_query(query, masks),
+        fstop=_query_number(query, "fstop", 2.8),
+        focus_distance_m=_query_number(query, "focus", scene.default_focus_m),
     )
     width = query_int(query, "width", DEFAULT_SIZE[0])
     height = query_int(query, "height", DEFAULT_SIZE[1])
