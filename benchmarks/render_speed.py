@@ -49,6 +49,7 @@ import time
 
 import numpy as np
 
+from bokehfit.apertures import make_aperture
 from bokehfit.scene import cornell_box, make_lens, make_settings, render_scene
 from bokehfit.scene.geometry import Scene
 
@@ -213,7 +214,7 @@ def main() -> None:
     args = parser.parse_args()
 
     scene = cornell_box()
-    lens = make_lens(args.shape, fstop=args.fstop, focus_distance_m=args.focus_distance)
+    lens = make_lens(make_aperture(args.shape), fstop=args.fstop, focus_distance_m=args.focus_distance)
     out = dict(args=vars(args))
 
     # 1. Samples per second at several resolutions.

@@ -10,6 +10,7 @@ import numpy as np
 import OpenEXR
 import pytest
 
+from bokehfit.apertures import make_aperture
 from bokehfit.kernels import render_kernel
 
 
@@ -25,7 +26,7 @@ def test_writes_npy_png_exr(tmp_path):
         done = bokehfit(*common, "--out", f"k.{suffix}", cwd=tmp_path)
         assert done.returncode == 0, done.stderr
         assert "method exact" in done.stdout and "ms" in done.stdout
-    expected = render_kernel("star", 12.0, 30.0, 48)
+    expected = render_kernel(make_aperture("star", 12.0), 30.0, 48)
     np.testing.assert_array_equal(np.load(tmp_path / "k.npy"), expected)
     png = cv2.imread(str(tmp_path / "k.png"), cv2.IMREAD_UNCHANGED)
     assert png.dtype == np.uint16 and png.max() == 65535
@@ -86,7 +87,7 @@ def test_ngon_n_spelling_as_in_compare_shapes(tmp_path):
     done = bokehfit("kernel", "--shape", "ngon(9)", "--diameter-px", "20", "--size", "32", "--out", "k.npy", cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     assert "ngon(9)" in done.stdout
-    np.testing.assert_array_equal(np.load(tmp_path / "k.npy"), render_kernel("ngon", 0.0, 20.0, 32, blades=9))
+    np.testing.assert_array_equal(np.load(tmp_path / "k.npy"), render_kernel(make_aperture("ngon", blades=9), 20.0, 32))
 
 
 
@@ -95,17 +96,16 @@ def test_feature_flags_match_the_api(tmp_path):
 
     common = ["kernel", "--diameter-px", "20", "--size", "32", "--out", "k.npy"]
     cases = [
-        (["--shape", "ngon(9)", "--roundness", "0.5"], dict(shape="ngon", blades=9, roundness=0.5)),
-        (["--squeeze", "1.5", "--angle", "10"], dict(shape="hexagon", angle_deg=10.0, squeeze=1.5)),
-        (["--rim", "-0.4", "--side", "near"], dict(shape="hexagon", rim=-0.4, side="near")),
+        (["--shape", "ngon(9)", "--roundness", "0.5"], make_aperture("ngon", blades=9, roundness=0.5), {}),
+        (["--squeeze", "1.5", "--angle", "10"], make_aperture("hexagon", 10.0, squeeze=1.5), {}),
+        (["--rim", "-0.4", "--side", "near"], make_aperture("hexagon", rim=-0.4), dict(side="near")),
         (["--vignetting", "1.1,0.9", "--field-position", "0.7,-0.2"],
-         dict(shape="hexagon", vignetting=Vignetting(1.1, 0.9), field_position=(0.7, -0.2))),
+         make_aperture("hexagon", vignetting=Vignetting(1.1, 0.9)), dict(field_position=(0.7, -0.2))),
     ]
-    for flags, params in cases:
+    for flags, aperture, params in cases:
         done = bokehfit(*common, *flags, cwd=tmp_path)
         assert done.returncode == 0, done.stderr
-        shape = params.pop("shape")
-        np.testing.assert_array_equal(np.load(tmp_path / "k.npy"), render_kernel(shape, diameter_px=20.0, size=32, **params))
+        np.testing.assert_array_equal(np.load(tmp_path / "k.npy"), render_kernel(aperture, diameter_px=20.0, size=32, **params))
     assert "% of the light passes" in done.stdout
 
 
@@ -116,7 +116,7 @@ def test_chromatic_writes_rgb_npy_png_exr(tmp_path):
     for suffix in ("npy", "png", "exr"):
         done = bokehfit(*common, "--out", f"k.{suffix}", cwd=tmp_path)
         assert done.returncode == 0, done.stderr
-    expected = render_kernel("hexagon", diameter_px=20.0, size=32, chromatic=Chromatic(0.08, -0.06))
+    expected = render_kernel(make_aperture("hexagon", chromatic=Chromatic(0.08, -0.06)), diameter_px=20.0, size=32)
     assert expected.shape == (32, 32, 3)
     np.testing.assert_array_equal(np.load(tmp_path / "k.npy"), expected)
     png = cv2.imread(str(tmp_path / "k.png"), cv2.IMREAD_UNCHANGED)[..., ::-1]  # OpenCV reads BGR

@@ -180,16 +180,19 @@ def test_chromatic_three_channels_scaled_discs():
     assert kernel.shape == (32, 32, 3) and kernel.dtype == np.float32
     np.testing.assert_allclose(kernel.sum(axis=(0, 1)), 1.0, atol=1e-5)
     for channel, factor in ((0, 1.1), (1, 1.0), (2, 0.92)):
-        np.testing.assert_allclose(kernel[..., channel], render_kernel("hexagon", 15.0, 20.0 * factor, 32), atol=1e-7)
+        plain = render_kernel(make_aperture("hexagon", 15.0), 20.0 * factor, 32)
+        np.testing.assert_allclose(kernel[..., channel], plain, atol=1e-7)
     near = render_kernel(aperture, diameter_px=20.0, size=32, side="near")
-    np.testing.assert_allclose(near[..., 0], render_kernel("hexagon", 195.0, 20.0 * 0.9, 32), atol=1e-7)
+    np.testing.assert_allclose(near[..., 0], render_kernel(make_aperture("hexagon", 195.0), 20.0 * 0.9, 32), atol=1e-7)
 
 
-def test_aperture_and_its_parameters_not_both():
-    with pytest.raises(InputError, match="roundness"):
+def test_the_kernel_takes_the_aperture_whole():
+    with pytest.raises(TypeError, match="roundness"):  # a feature travels inside the Aperture only
         render_kernel(make_aperture("hexagon"), diameter_px=10.0, size=16, roundness=0.5)
+    with pytest.raises(InputError, match="^aperture must be an Aperture"):
+        render_kernel("hexagon", 10.0, 16)
     with pytest.raises(InputError, match="field_position"):
-        render_kernel("hexagon", 0.0, 10.0, 16, field_position=(1.0, 2.0, 3.0))
+        render_kernel(make_aperture("hexagon"), 10.0, 16, field_position=(1.0, 2.0, 3.0))
 
 
 def l1(kernel, reference):

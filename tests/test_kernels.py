@@ -39,7 +39,7 @@ def brute_force_kernel(shape, angle, diameter, size, **params):
 
 @pytest.mark.parametrize("shape,params", SHAPE_PARAMS)
 def test_exact_sums_to_one_and_matches_brute_force(shape, params):
-    kernel = render_kernel(shape, 17.0, 21.0, 40, **params)
+    kernel = render_kernel(make_aperture(shape, 17.0, **params), 21.0, 40)
     assert kernel.dtype == np.float32 and kernel.shape == (40, 40)
     assert kernel.sum() == pytest.approx(1.0, abs=1e-6)
     reference = brute_force_kernel(shape, 17.0, 21.0, 40, **params)
@@ -87,8 +87,9 @@ def test_exact_edge_only_matches_the_whole_grid(monkeypatch, shape, params, diam
 
 @pytest.mark.parametrize("shape,params", SHAPE_PARAMS)
 def test_near_is_far_rotated_180(shape, params):
-    far = render_kernel(shape, 33.0, 19.0, 31, **params)
-    near = render_kernel(shape, 33.0, 19.0, 31, side="near", **params)
+    aperture = make_aperture(shape, 33.0, **params)
+    far = render_kernel(aperture, 19.0, 31)
+    near = render_kernel(aperture, 19.0, 31, side="near")
     np.testing.assert_allclose(near, np.rot90(far, 2), atol=1e-7)
     if shape in ("triangle", "pentagon", "star"):  # odd symmetry: near differs from far
         assert np.abs(near - far).sum() > 0.1
@@ -97,7 +98,7 @@ def test_near_is_far_rotated_180(shape, params):
 def test_light_projects_to_frame_centre():
     """The kernel's centroid is the light's projection ((size-1)/2, (size-1)/2)."""
     for size in (31, 32):
-        kernel = render_kernel("square", 0.0, 9.0, size)
+        kernel = render_kernel(make_aperture("square", 0.0), 9.0, size)
         rows, cols = np.indices(kernel.shape)
         assert (kernel * cols).sum() == pytest.approx((size - 1) / 2, abs=1e-5)
         assert (kernel * rows).sum() == pytest.approx((size - 1) / 2, abs=1e-5)
@@ -105,7 +106,7 @@ def test_light_projects_to_frame_centre():
 
 def test_triangle_at_90_points_up_on_screen():
     """y is up on screen: at 90° a vertex points to row 0 (the top), not the bottom."""
-    kernel = render_kernel("triangle", 90.0, 40.0, 64)
+    kernel = render_kernel(make_aperture("triangle", 90.0), 40.0, 64)
     top, bottom = kernel[:24].sum(), kernel[40:].sum()
     assert top < bottom  # the vertex (narrow part) is at the top; the wide base below
 
@@ -125,9 +126,9 @@ def l1(kernel, reference):
     ],
 )
 def test_sampling_methods_converge_to_exact(gpu, method, sampling, min_rate):
-    exact = render_kernel("hexagon", 20.0, 64.0, 128).astype(np.float64)
+    exact = render_kernel(make_aperture("hexagon", 20.0), 64.0, 128).astype(np.float64)
     errors = [
-        l1(render_kernel("hexagon", 20.0, 64.0, 128, method=method, sampling=sampling, samples=n, seed=3), exact)
+        l1(render_kernel(make_aperture("hexagon", 20.0), 64.0, 128, method=method, sampling=sampling, samples=n, seed=3), exact)
         for n in (10**5, 10**7)
     ]
     rate = math.log(errors[0] / errors[1]) / math.log(100.0)
@@ -139,22 +140,23 @@ def test_sampling_methods_converge_to_exact(gpu, method, sampling, min_rate):
 @pytest.mark.parametrize("shape,params", SHAPE_PARAMS)
 def test_sampling_methods_match_exact_for_every_shape(gpu, method, shape, params):
     for side in ("far", "near"):
-        exact = render_kernel(shape, 41.0, 24.0, 40, side=side, **params).astype(np.float64)
-        sampled = render_kernel(shape, 41.0, 24.0, 40, side=side, method=method, samples=4 * 10**6, **params)
+        aperture = make_aperture(shape, 41.0, **params)
+        exact = render_kernel(aperture, 24.0, 40, side=side).astype(np.float64)
+        sampled = render_kernel(aperture, 24.0, 40, side=side, method=method, samples=4 * 10**6)
         assert sampled.sum() == pytest.approx(1.0, abs=1e-5)
         assert l1(sampled, exact) < 0.01, f"{method} {shape} {side}"
 
 
 def test_mc_same_seed_same_kernel(gpu):
-    a = render_kernel("star", 5.0, 30.0, 48, method="mc", samples=10**5, seed=11)
-    b = render_kernel("star", 5.0, 30.0, 48, method="mc", samples=10**5, seed=11)
-    c = render_kernel("star", 5.0, 30.0, 48, method="mc", samples=10**5, seed=12)
+    a = render_kernel(make_aperture("star", 5.0), 30.0, 48, method="mc", samples=10**5, seed=11)
+    b = render_kernel(make_aperture("star", 5.0), 30.0, 48, method="mc", samples=10**5, seed=11)
+    c = render_kernel(make_aperture("star", 5.0), 30.0, 48, method="mc", samples=10**5, seed=12)
     np.testing.assert_array_equal(a, b)
     assert np.abs(a - c).sum() > 0
 
 
 def test_samples_reported_are_samples_drawn(gpu):
-    kernel = compute_kernel("circle", 0.0, 20.0, 32, method="mc", samples=1000)
+    kernel = compute_kernel(make_aperture("circle", 0.0), 20.0, 32, method="mc", samples=1000)
     assert kernel.samples == 32 * 32  # stratified: rounded up to a square, m = 32
     assert "Vulkan" in kernel.device or "OpenGL" in kernel.device or kernel.device
 
@@ -163,7 +165,7 @@ def test_samples_reported_are_samples_drawn(gpu):
 def test_tiny_disc_half_pixel(request, method):
     if method != "exact":
         request.getfixturevalue("gpu")
-    kernel = render_kernel("hexagon", 0.0, 0.5, 8, method=method, samples=10**5)
+    kernel = render_kernel(make_aperture("hexagon", 0.0), 0.5, 8, method=method, samples=10**5)
     assert kernel.sum() == pytest.approx(1.0, abs=1e-6)
     # Even size: the light sits on the corner of the four central pixels.
     assert kernel[3:5, 3:5].sum() == pytest.approx(1.0, abs=1e-6)
@@ -171,7 +173,7 @@ def test_tiny_disc_half_pixel(request, method):
 
 
 def test_huge_disc_1000px():
-    kernel = compute_kernel("pentagon", 10.0, 1000.0, 1200)  # circumradius 575 px
+    kernel = compute_kernel(make_aperture("pentagon", 10.0), 1000.0, 1200)  # circumradius 575 px
     assert kernel.clipped_fraction == 0.0
     assert kernel.image.sum() == pytest.approx(1.0, abs=1e-5)
     assert np.all(np.isfinite(kernel.image)) and kernel.image.min() >= 0.0
@@ -180,8 +182,8 @@ def test_huge_disc_1000px():
 
 
 def test_huge_disc_1000px_mc(gpu):
-    exact = render_kernel("circle", 0.0, 1000.0, 1024).astype(np.float64)
-    sampled = render_kernel("circle", 0.0, 1000.0, 1024, method="mc", samples=2 * 10**7)
+    exact = render_kernel(make_aperture("circle", 0.0), 1000.0, 1024).astype(np.float64)
+    sampled = render_kernel(make_aperture("circle", 0.0), 1000.0, 1024, method="mc", samples=2 * 10**7)
     # 25 samples a pixel; independent samples would give L1 ≈ √(pixels / N) ≈ 0.2.
     assert l1(sampled, exact) < 0.08
 
@@ -191,7 +193,7 @@ def test_frame_smaller_than_disc_is_clipped_and_says_so(request, method):
     if method != "exact":
         request.getfixturevalue("gpu")
     with pytest.warns(KernelClippedWarning, match=r"kernel clipped: .*% of the light"):
-        kernel = compute_kernel("square", 0.0, 40.0, 16, method=method, samples=10**5)
+        kernel = compute_kernel(make_aperture("square", 0.0), 40.0, 16, method=method, samples=10**5)
     assert kernel.image.sum() == pytest.approx(1.0, abs=1e-6)
     lost = 1 - 16 * 16 / (math.pi * 40.0**2 / 4)
     assert kernel.clipped_fraction == pytest.approx(lost, rel=1e-9)
@@ -200,19 +202,19 @@ def test_frame_smaller_than_disc_is_clipped_and_says_so(request, method):
 def test_unclipped_kernel_gives_no_warning():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        render_kernel("hexagon", 0.0, 30.0, 34)  # circumradius 16.5 px < 17
+        render_kernel(make_aperture("hexagon", 0.0), 30.0, 34)  # circumradius 16.5 px < 17
 
 
 @pytest.mark.parametrize("angle_pair", [(0.0, 60.0), (-30.0, 30.0), (390.0, 30.0), (60.0 - 1e-6, -1e-6)])
 def test_angles_equivalent_modulo_symmetry(angle_pair):
-    a, b = (render_kernel("hexagon", angle, 30.0, 40) for angle in angle_pair)
+    a, b = (render_kernel(make_aperture("hexagon", angle), 30.0, 40) for angle in angle_pair)
     np.testing.assert_allclose(a, b, atol=1e-7)
 
 
 @pytest.mark.parametrize("aspect", [0.01, 100.0])
 def test_extreme_slit_aspects(aspect):
     with pytest.warns(KernelClippedWarning):
-        kernel = render_kernel("slit", 0.0, 20.0, 64, aspect=aspect)
+        kernel = render_kernel(make_aperture("slit", 0.0, aspect=aspect), 20.0, 64)
     assert np.all(np.isfinite(kernel)) and kernel.sum() == pytest.approx(1.0, abs=1e-6)
     # A thin slit: all light in one column (aspect 0.01) or one row (aspect 100).
     axis = 0 if aspect < 1 else 1
@@ -240,8 +242,10 @@ def test_extreme_slit_aspects(aspect):
 def test_bad_parameters_raise_value_error_naming_them(kwargs, parameter):
     args = dict(shape="hexagon", angle_deg=0.0, diameter_px=20.0, size=32)
     args.update(kwargs)
-    with pytest.raises(ValueError, match=parameter):
-        render_kernel(args.pop("shape"), args.pop("angle_deg"), args.pop("diameter_px"), args.pop("size"), **args)
+    with pytest.raises(ValueError, match=parameter):  # the aperture's own, from make_aperture; the kernel's from render_kernel
+        features = {name: args.pop(name) for name in ("blades", "aspect") if name in args}
+        aperture = make_aperture(args.pop("shape"), args.pop("angle_deg"), **features)
+        render_kernel(aperture, args.pop("diameter_px"), args.pop("size"), **args)
 
 
 # --- limits: the adapter's, the sample counts', the tolerance's ---------------------------------
@@ -272,7 +276,7 @@ def test_mc_band_rows_follow_the_adapter_limits():
 
 def test_raster_sub_pixel_disc_at_the_default_sample_count(gpu):
     """2²² samples over a 0.5-px disc ask for 2·10⁷ super-samples a pixel: capped, not a crash."""
-    kernel = compute_kernel("hexagon", 0.0, 0.5, 8, method="raster")
+    kernel = compute_kernel(make_aperture("hexagon", 0.0), 0.5, 8, method="raster")
     assert kernel.image.sum() == pytest.approx(1.0, abs=1e-6)
     np.testing.assert_allclose(kernel.image[3:5, 3:5], 0.25, atol=0.01)
     assert 0 < kernel.samples <= 2**22
@@ -282,7 +286,7 @@ def test_samples_beyond_the_largest_stratified_grid_are_refused_before_the_gpu()
     from bokehfit.errors import InputError
 
     with pytest.raises(InputError, match=r"^samples must be an integer in \[1, 2147395600\] \(got 2147483648\)"):
-        render_kernel("hexagon", 0.0, 20.0, 32, method="mc", samples=2**31)
+        render_kernel(make_aperture("hexagon", 0.0), 20.0, 32, method="mc", samples=2**31)
 
 
 @pytest.mark.parametrize("method", [None, "exact"])
@@ -290,7 +294,7 @@ def test_unreachable_tolerance_names_the_smallest(method):
     from bokehfit.errors import InputError
 
     with pytest.raises(InputError, match=r"^tolerance must be at least 5.96e-08, the float32 rounding"):
-        render_kernel("hexagon", 0.0, 64.0, 128, method=method, tolerance=1e-300)
+        render_kernel(make_aperture("hexagon", 0.0), 64.0, 128, method=method, tolerance=1e-300)
 
 
 def test_tolerance_beyond_a_sampling_method_names_its_smallest():
@@ -299,17 +303,17 @@ def test_tolerance_beyond_a_sampling_method_names_its_smallest():
 
     smallest = predicted_l1("mc", "stratified", 64.0, 46340**2)
     with pytest.raises(InputError, match=rf"^tolerance must be at least {smallest:.3g} for method 'mc' on a 64-px disc"):
-        render_kernel("hexagon", 0.0, 64.0, 128, method="mc", tolerance=1e-6)
+        render_kernel(make_aperture("hexagon", 0.0), 64.0, 128, method="mc", tolerance=1e-6)
 
 
 @pytest.mark.parametrize("diameter", [12.0, 60.0, 150.0, 500.0])
 def test_auto_draws_a_usual_kernel_exactly_without_a_gpu(diameter):
     # A kernel drawn on its own: exact costs milliseconds, a GPU's start-up most of a second.
     size = int(diameter * 1.3) + 9
-    kernel = compute_kernel("pentagon", 20.0, diameter, size, method="auto", tolerance=0.01)
+    kernel = compute_kernel(make_aperture("pentagon", 20.0), diameter, size, method="auto", tolerance=0.01)
     assert kernel.method == "exact" and kernel.samples is None and kernel.device is None
     assert kernel.setup_s < 1e-3  # nothing to start
-    np.testing.assert_array_equal(kernel.image, render_kernel("pentagon", 20.0, diameter, size))
+    np.testing.assert_array_equal(kernel.image, render_kernel(make_aperture("pentagon", 20.0), diameter, size))
 
 
 def test_auto_counts_the_start_up_that_a_batch_shares():
@@ -329,7 +333,7 @@ def test_auto_counts_the_start_up_that_a_batch_shares():
 
 
 def test_auto_without_tolerance_is_exact():
-    kernel = compute_kernel("star", 0.0, 30.0, 49, method="auto")
+    kernel = compute_kernel(make_aperture("star", 0.0), 30.0, 49, method="auto")
     assert kernel.method == "exact"
 
 
@@ -337,4 +341,4 @@ def test_unknown_method_lists_auto():
     from bokehfit.errors import InputError
 
     with pytest.raises(InputError, match=r"^method must be one of exact, mc, raster, auto \(got 'fastest'\)"):
-        compute_kernel("star", 0.0, 30.0, 49, method="fastest")
+        compute_kernel(make_aperture("star", 0.0), 30.0, 49, method="fastest")

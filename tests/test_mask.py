@@ -19,7 +19,7 @@ from bokehfit.errors import InputError
 from bokehfit.fit.families import FAMILIES
 from bokehfit.kernels import compute_kernel, render_kernel
 from bokehfit.kernels.exact import mask_coverage
-from bokehfit.scene import render
+from bokehfit.scene import build_scene, make_lens, make_settings, render
 
 #: Significance level of the chi-square tests.
 SIGNIFICANCE = 1e-3
@@ -220,7 +220,7 @@ def test_exact_kernel_is_the_box_integral_of_the_mask():
     scale, size = 5.3, 15
     expected = separable_coverage(aperture.mask.transmission, aperture.mask.cell, scale, size)
     np.testing.assert_allclose(mask_coverage(aperture, scale, size), expected, rtol=0, atol=1e-12)
-    kernel = render_kernel("mask", 0.0, 2 * scale / math.sqrt(math.pi), size, mask=t)
+    kernel = render_kernel(make_aperture("mask", 0.0, mask=t), 2 * scale / math.sqrt(math.pi), size)
     np.testing.assert_allclose(kernel, expected / expected.sum(), rtol=0, atol=1e-7)
 
 
@@ -238,17 +238,17 @@ def test_exact_rotated_kernel_against_supersampled_brute_force(angle, squeeze):
 
 
 def test_near_kernel_is_the_far_one_turned_by_half_a_turn():
-    far = render_kernel("mask", 15.0, 9.0, 17, mask=ring_mask())
-    near = render_kernel("mask", 15.0, 9.0, 17, mask=ring_mask(), side="near")
+    far = render_kernel(make_aperture("mask", 15.0, mask=ring_mask()), 9.0, 17)
+    near = render_kernel(make_aperture("mask", 15.0, mask=ring_mask()), 9.0, 17, side="near")
     np.testing.assert_allclose(near, far[::-1, ::-1], atol=1e-7)
     assert np.abs(near - far).sum() > 0.1
 
 
 @pytest.mark.gpu
 def test_mc_kernel_converges_to_exact(gpu):
-    exact = render_kernel("mask", 30.0, 9.0, 15, mask=ring_mask())
+    exact = render_kernel(make_aperture("mask", 30.0, mask=ring_mask()), 9.0, 15)
     errors = [
-        np.abs(render_kernel("mask", 30.0, 9.0, 15, mask=ring_mask(), method="mc", samples=n, seed=1) - exact).sum()
+        np.abs(render_kernel(make_aperture("mask", 30.0, mask=ring_mask()), 9.0, 15, method="mc", samples=n, seed=1) - exact).sum()
         for n in (2**12, 2**18)
     ]
     assert errors[1] < 0.02 and errors[1] < errors[0] / 4, errors
@@ -318,7 +318,7 @@ def test_clipped_mask_kernel_reports_the_lost_light():
     from bokehfit.kernels import KernelClippedWarning
 
     with pytest.warns(KernelClippedWarning):
-        kernel = compute_kernel("mask", 0.0, 14.0, 9, mask=ring_mask())
+        kernel = compute_kernel(make_aperture("mask", 0.0, mask=ring_mask()), 14.0, 9)
     assert 0.0 < kernel.clipped_fraction < 1.0
 
 
@@ -339,7 +339,7 @@ def test_cli_kernel_with_a_mask(tmp_path, capsys):
     mask = save_mask(tmp_path)
     out = tmp_path / "k.npy"
     kernel = main(["kernel", "--shape", "mask", "--mask", mask, "--diameter-px", "9", "--size", "15", "--angle", "30", "--out", str(out)])
-    np.testing.assert_allclose(np.load(out), render_kernel("mask", 30.0, 9.0, 15, mask=mask), atol=1e-7)
+    np.testing.assert_allclose(np.load(out), render_kernel(make_aperture("mask", 30.0, mask=mask), 9.0, 15), atol=1e-7)
     assert kernel.aperture.mask == load_mask(mask)
     assert "mask 9×9" in capsys.readouterr().out
 
@@ -367,11 +367,11 @@ def test_cli_similarity_refuses_a_mask_contour_in_pieces(tmp_path):
 def test_lens_takes_a_mask(tmp_path):
     from bokehfit.scene import make_lens
 
-    lens = make_lens("mask", 12.0, fstop=2.0, focus_distance_m=0.7, mask=save_mask(tmp_path))
+    lens = make_lens(make_aperture("mask", 12.0, mask=save_mask(tmp_path)), fstop=2.0, focus_distance_m=0.7)
     assert lens.aperture.mask == MaskTable.from_array(np.round(ring_mask() * 255) / 255)
     assert lens.to_json()["mask"] == {"width": 9, "height": 9, "sha256": lens.aperture.mask.digest}
     with pytest.raises(InputError, match="^mask is required"):
-        make_lens("mask", fstop=2.0, focus_distance_m=0.7)
+        make_lens(make_aperture("mask"), fstop=2.0, focus_distance_m=0.7)
 
 
 def bokehfit_command(*args, cwd):
@@ -390,7 +390,8 @@ def test_cli_render_with_a_mask(tmp_path, gpu):
     with OpenEXR.File(str(tmp_path / "m.exr")) as exr:
         channels = exr.channels()
         image = channels["RGB"].pixels if "RGB" in channels else np.stack([channels[c].pixels for c in "RGB"], axis=-1)
-    expected = render("points", shape="mask", mask=mask, angle_deg=30.0, fstop=1.4, spp=4, width=48, height=32).image
+    lens = make_lens(make_aperture("mask", 30.0, mask=mask), fstop=1.4, focus_distance_m=build_scene("points").default_focus_m)
+    expected = render("points", lens, make_settings(48, 32, 4)).image
     np.testing.assert_array_equal(image, expected)
     assert image.max() > 0.0
     assert json.loads((tmp_path / "m.json").read_text())["lens"]["mask"]["sha256"] == load_mask(mask).digest

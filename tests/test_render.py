@@ -18,6 +18,7 @@ import numpy as np
 import OpenEXR
 import pytest
 
+from bokehfit.apertures import make_aperture
 from bokehfit.errors import InputError
 from bokehfit.kernels import render_kernel
 from bokehfit.optics import coc_mm
@@ -28,6 +29,9 @@ from bokehfit.scene import (
     Pose,
     Quad,
     Scene,
+    build_scene,
+    make_lens,
+    make_settings,
     render,
     tile_plan,
 )
@@ -43,6 +47,9 @@ MIN_IOU = 0.95
 #: a disc of (100²/1.5)·(1/500 mm) = 13.3 mm on the sensor, 35.6 px in a 96-px frame.
 POINT_FRAME = 96
 POINT_LENS = dict(focal_length_mm=100.0, fstop=1.5, focus_distance_m=0.5)
+#: The focus distances of the named scenes (their own, which the command line uses unless told).
+CORNELL_FOCUS_M = build_scene("cornell").default_focus_m
+POINTS_FOCUS_M = build_scene("points").default_focus_m
 
 #: Every shape, at angles that no symmetry maps back onto 0 (the slit at aspect 0.4 so that it fits the frame).
 SHAPE_CASES = [
@@ -74,9 +81,8 @@ def expected_diameter_px(lens: dict, depth_m: float, width_px: int) -> float:
 
 def render_point(shape, angle, params, depth_m, *, spp=64, seed=0):
     scene = PointScene("point", (PointLight(0.5, 0.5, depth_m),))
-    result = render(
-        scene, shape=shape, angle_deg=angle, spp=spp, width=POINT_FRAME, height=POINT_FRAME, seed=seed, **POINT_LENS, **params
-    )
+    lens = make_lens(make_aperture(shape, angle, **params), **POINT_LENS)
+    result = render(scene, lens, make_settings(POINT_FRAME, POINT_FRAME, spp, seed))
     return result.image.mean(axis=-1)
 
 
@@ -85,7 +91,7 @@ def test_far_point_light_shows_the_aperture(gpu, shape, angle, params):
     image = render_point(shape, angle, params, math.inf)
     diameter = expected_diameter_px(POINT_LENS, math.inf, POINT_FRAME)
     assert 35.0 < diameter < 36.0  # the geometry stated above
-    kernel = render_kernel(shape, angle, diameter, POINT_FRAME, method="exact", **params)
+    kernel = render_kernel(make_aperture(shape, angle, **params), diameter, POINT_FRAME, method="exact")
     score = iou(plateau_mask(image), plateau_mask(kernel))
     assert score >= MIN_IOU, f"{shape} {angle}°: IoU {score:.3f} against the exact kernel of {diameter:.2f} px"
 
@@ -96,8 +102,9 @@ def test_near_point_light_is_turned_by_180_degrees(gpu):
     diameter = expected_diameter_px(POINT_LENS, depth, POINT_FRAME)
     assert diameter == pytest.approx(expected_diameter_px(POINT_LENS, math.inf, POINT_FRAME))
     mask = plateau_mask(render_point("triangle", 15.0, {}, depth))
-    near = plateau_mask(render_kernel("triangle", 15.0, diameter, POINT_FRAME, method="exact", side="near"))
-    far = plateau_mask(render_kernel("triangle", 15.0, diameter, POINT_FRAME, method="exact", side="far"))
+    triangle = make_aperture("triangle", 15.0)
+    near = plateau_mask(render_kernel(triangle, diameter, POINT_FRAME, method="exact", side="near"))
+    far = plateau_mask(render_kernel(triangle, diameter, POINT_FRAME, method="exact", side="far"))
     assert iou(mask, near) >= MIN_IOU
     assert iou(mask, far) < 0.8, "a triangle and its 180° turn must be told apart"
 
@@ -107,7 +114,7 @@ def test_disc_diameters_follow_the_blur_formula(gpu):
     lens = dict(focal_length_mm=100.0, fstop=2.0, focus_distance_m=0.5)
     width, height = 192, 96
     scene = PointScene("pair", (PointLight(0.25, 0.5, 1.0), PointLight(0.75, 0.5, math.inf)))
-    image = render(scene, shape="circle", spp=64, width=width, height=height, **lens).image.mean(axis=-1)
+    image = render(scene, make_lens(make_aperture("circle"), **lens), make_settings(width, height, 64)).image.mean(axis=-1)
     measured = []
     for half in (image[:, : width // 2], image[:, width // 2 :]):
         area = plateau_mask(half).sum()
@@ -129,8 +136,9 @@ def edge_scene(depth_m: float) -> Scene:
     return Scene("edge", (glow,), quads=(quad,), pose=Pose((0.0, 0.0, 0.0)))
 
 
-def edge_profile(depth_m, *, width, height=8, spp=256, **lens) -> np.ndarray:
-    result = render(edge_scene(depth_m), spp=spp, width=width, height=height, **lens)
+def edge_profile(depth_m, *, width, height=8, spp=256, aperture=None, **lens) -> np.ndarray:
+    aperture = make_aperture("circle") if aperture is None else aperture
+    result = render(edge_scene(depth_m), make_lens(aperture, **lens), make_settings(width, height, spp))
     assert result.nonfinite_pixels == 0
     return result.image.mean(axis=(0, 2))
 
@@ -142,7 +150,7 @@ def expected_edge_profile(shape, angle, diameter, side, width, oversample=8) -> 
     an ``oversample``× finer kernel and averaged over each pixel.
     """
     size = 2 * int(math.ceil(diameter)) + 8
-    fine = render_kernel(shape, angle, oversample * diameter, oversample * size, method="exact", side=side)
+    fine = render_kernel(make_aperture(shape, angle), oversample * diameter, oversample * size, method="exact", side=side)
     cdf = np.concatenate([[0.0], np.cumsum(fine.sum(axis=0, dtype=np.float64))])
     centre = oversample * size / 2.0  # the kernel's centre, in fine columns from the left
     x = np.arange(width)[:, None] + (np.arange(oversample)[None, :] + 0.5) / oversample
@@ -156,7 +164,7 @@ def test_path_traced_edge_matches_the_exact_kernel(gpu, depth_m, side):
     lens = dict(focal_length_mm=100.0, fstop=2.0, focus_distance_m=0.2)
     width = 64
     diameter = expected_diameter_px(lens, depth_m, width)
-    profile = edge_profile(depth_m, width=width, height=16, spp=1024, shape="triangle", angle_deg=0.0, **lens)
+    profile = edge_profile(depth_m, width=width, height=16, spp=1024, aperture=make_aperture("triangle", 0.0), **lens)
     expected = expected_edge_profile("triangle", 0.0, diameter, side, width)
     wrong = expected_edge_profile("triangle", 0.0, diameter, "near" if side == "far" else "far", width)
     # Monte-Carlo noise: 16 rows × 1024 spp of a 0/1 variable, σ ≤ 0.004 per column. A blur
@@ -195,11 +203,12 @@ def test_mean_brightness_does_not_depend_on_the_shape(gpu):
     the tolerance is about 4 % of the mean).
     """
     seeds = 4
-    common = dict(fstop=1.4, angle_deg=20.0, spp=128, width=32, height=32)
     shapes = (("circle", {}), ("slit", {}), ("triangle", {}), ("star", {}), ("ngon", {"blades": 9}), ("square", {}))
+    lenses = {shape: make_lens(make_aperture(shape, 20.0, **params), fstop=1.4, focus_distance_m=CORNELL_FOCUS_M)
+              for shape, params in shapes}
     means = {
-        shape: [float(render("cornell", shape=shape, seed=100 * i + s, **common, **params).image.mean()) for s in range(seeds)]
-        for i, (shape, params) in enumerate(shapes)
+        shape: [float(render("cornell", lens, make_settings(32, 32, 128, 100 * i + s)).image.mean()) for s in range(seeds)]
+        for i, (shape, lens) in enumerate(lenses.items())
     }
     sigma = math.sqrt(np.mean([np.var(m, ddof=1) for m in means.values()]))
     reference = float(np.mean(means["circle"]))
@@ -211,14 +220,16 @@ def test_mean_brightness_does_not_depend_on_the_shape(gpu):
 
 
 def test_fixed_seed_gives_the_same_image(gpu):
-    common = dict(shape="hexagon", angle_deg=20.0, fstop=1.4, spp=4, width=16, height=12)
-    a = render("cornell", seed=3, **common).image
-    b = render("cornell", seed=3, **common).image
-    c = render("cornell", seed=4, **common).image
+    hexagon = make_aperture("hexagon", 20.0)
+    lens = make_lens(hexagon, fstop=1.4, focus_distance_m=CORNELL_FOCUS_M)
+    a = render("cornell", lens, make_settings(16, 12, 4, seed=3)).image
+    b = render("cornell", lens, make_settings(16, 12, 4, seed=3)).image
+    c = render("cornell", lens, make_settings(16, 12, 4, seed=4)).image
     np.testing.assert_array_equal(a, b)
     assert not np.array_equal(a, c)
-    p = render("points", seed=3, **common).image
-    np.testing.assert_array_equal(p, render("points", seed=3, **common).image)
+    lens = make_lens(hexagon, fstop=1.4, focus_distance_m=POINTS_FOCUS_M)
+    p = render("points", lens, make_settings(16, 12, 4, seed=3)).image
+    np.testing.assert_array_equal(p, render("points", lens, make_settings(16, 12, 4, seed=3)).image)
 
 
 #: Focus on the mirror wall: from the camera (z = −0.55 m) to the rear wall (z = 0.555 m).
@@ -238,16 +249,19 @@ REAR_WALL_M = 0.555 + 0.55
     ids=["focus-on-wall", "f0.7", "f64", "aspect0.01", "aspect0.01-f0.7", "1x1"],
 )
 def test_hard_parameters_give_finite_pixels(gpu, params):
-    args = dict(shape="star", fstop=2.8, spp=4, width=12, height=10)
+    args = dict(shape="star", fstop=2.8, focus_distance_m=CORNELL_FOCUS_M, spp=4, width=12, height=10)
     args.update(params)
-    image = render("cornell", **args).image
+    aperture = make_aperture(args.pop("shape"), aspect=args.pop("aspect", None))
+    settings = make_settings(args.pop("width"), args.pop("height"), args.pop("spp"))
+    image = render("cornell", make_lens(aperture, **args), settings).image
     assert np.isfinite(image).all()
     assert image.min() >= 0.0 and image.max() > 0.0
 
 
 def test_points_scene_hard_cases_are_finite(gpu):
     # A light on the focus plane (one sharp pixel), one at infinity, one very near; a needle slit.
-    result = render("points", shape="slit", aspect=0.01, fstop=0.7, light_depths_m=(0.3, math.inf, 0.01), spp=4, width=48, height=24)
+    lens = make_lens(make_aperture("slit", aspect=0.01), fstop=0.7, focus_distance_m=POINTS_FOCUS_M)
+    result = render("points", lens, make_settings(48, 24, 4), light_depths_m=(0.3, math.inf, 0.01))
     assert np.isfinite(result.image).all()
     assert result.image.max() > 0.0
 
@@ -260,7 +274,8 @@ def test_large_image_is_tiled_within_the_adapter_limits(gpu):
         assert w * h * 16 <= limits["max-storage-buffer-binding-size"]
         covered[y : y + h, x : x + w] += 1
     assert (covered == 1).all() and len(tiles) > 1
-    result = render("points", shape="hexagon", fstop=2.8, spp=1, width=4096, height=4096)
+    lens = make_lens(make_aperture("hexagon"), fstop=2.8, focus_distance_m=POINTS_FOCUS_M)
+    result = render("points", lens, make_settings(4096, 4096, 1))
     assert result.tiles > 1
     assert np.isfinite(result.image).all() and result.image.max() > 0.0
 
@@ -268,17 +283,27 @@ def test_large_image_is_tiled_within_the_adapter_limits(gpu):
 @pytest.mark.parametrize("scene", ["cornell", "points"])
 @pytest.mark.parametrize("max_tile_pixels", [16, 40])
 def test_tiles_give_the_untiled_image(gpu, scene, max_tile_pixels):
-    common = dict(shape="triangle", angle_deg=10.0, fstop=1.4, spp=3, width=20, height=13, seed=5)
-    whole = render(scene, **common)
-    tiled = render(scene, max_tile_pixels=max_tile_pixels, **common)
+    lens = make_lens(make_aperture("triangle", 10.0), fstop=1.4, focus_distance_m=build_scene(scene).default_focus_m)
+    whole = render(scene, lens, make_settings(20, 13, 3, 5))
+    tiled = render(scene, lens, make_settings(20, 13, 3, 5, max_tile_pixels=max_tile_pixels))
     assert whole.tiles == 1 and tiled.tiles > 2
     np.testing.assert_array_equal(tiled.image, whole.image)
 
 
 def test_bad_lens_parameters_raise_input_error():
-    for kwargs in (dict(shape="hexgon"), dict(fstop=0.0), dict(fstop=float("nan")), dict(focus_distance_m=0.0), dict(spp=0), dict(width=0)):
+    circle = make_aperture("circle")
+    for build in (
+        lambda: make_aperture("hexgon"),
+        lambda: make_lens(circle, fstop=0.0, focus_distance_m=CORNELL_FOCUS_M),
+        lambda: make_lens(circle, fstop=float("nan"), focus_distance_m=CORNELL_FOCUS_M),
+        lambda: make_lens(circle, fstop=2.8, focus_distance_m=0.0),
+        lambda: make_settings(512, 512, 0),
+        lambda: make_settings(0, 512, 64),
+        lambda: render("cornell", circle),  # a lens is more than its aperture
+        lambda: render("cornell", make_lens(circle, fstop=2.8, focus_distance_m=CORNELL_FOCUS_M), dict(spp=4)),
+    ):
         with pytest.raises(InputError):
-            render("cornell", **kwargs)
+            build()
 
 
 # --- the command line --------------------------------------------------------------------------
@@ -307,7 +332,8 @@ def test_cli_writes_png_exr_and_json(tmp_path, gpu):
     with OpenEXR.File(str(tmp_path / "c.exr")) as exr:
         channels = exr.channels()  # R, G and B, which the reader groups as "RGB"
         rgb = channels["RGB"].pixels if "RGB" in channels else np.stack([channels[c].pixels for c in "RGB"], axis=-1)
-    expected = render("cornell", shape="pentagon", angle_deg=7.0, fstop=2.0, spp=4, width=24, height=16, seed=2).image
+    lens = make_lens(make_aperture("pentagon", 7.0), fstop=2.0, focus_distance_m=CORNELL_FOCUS_M)
+    expected = render("cornell", lens, make_settings(24, 16, 4, seed=2)).image
     np.testing.assert_array_equal(rgb, expected)
     assert not list(tmp_path.glob(".c.*")), "temporary files left behind"
 
@@ -324,12 +350,12 @@ def test_cli_real_lens_features(tmp_path, gpu):
     with OpenEXR.File(str(tmp_path / "f.exr")) as exr:
         channels = exr.channels()
         rgb = channels["RGB"].pixels if "RGB" in channels else np.stack([channels[c].pixels for c in "RGB"], axis=-1)
-    expected = render(
-        "points", shape="ngon", blades=9, fstop=1.4, spp=4, width=48, height=32, roundness=0.4, squeeze=1.3,
-        vignetting=dict(radius=1.1, shift=2.0), rim=0.5, chromatic=dict(red=0.03, blue=-0.02),
-    ).image
+    featured = make_aperture("ngon", blades=9, roundness=0.4, squeeze=1.3, vignetting=dict(radius=1.1, shift=2.0), rim=0.5,
+                             chromatic=dict(red=0.03, blue=-0.02))
+    settings = make_settings(48, 32, 4)
+    expected = render("points", make_lens(featured, fstop=1.4, focus_distance_m=POINTS_FOCUS_M), settings).image
     np.testing.assert_array_equal(rgb, expected)
-    plain = render("points", shape="ngon", blades=9, fstop=1.4, spp=4, width=48, height=32).image
+    plain = render("points", make_lens(make_aperture("ngon", blades=9), fstop=1.4, focus_distance_m=POINTS_FOCUS_M), settings).image
     assert not np.array_equal(rgb, plain)
 
 
@@ -373,7 +399,7 @@ def test_estimate_is_near_the_time_the_render_takes(gpu, scene):
     from bokehfit.scene import build_scene, estimate_render_s, make_lens, make_settings, render_scene
 
     built = build_scene(scene)
-    lens = make_lens("hexagon", 0.0, fstop=2.0, focus_distance_m=built.default_focus_m)
+    lens = make_lens(make_aperture("hexagon"), fstop=2.0, focus_distance_m=built.default_focus_m)
     settings = make_settings(96, 64, 24, 0)
     estimate, rate = estimate_render_s(built, lens, settings)
     actual = render_scene(built, lens, settings)
@@ -384,7 +410,8 @@ def test_estimate_is_near_the_time_the_render_takes(gpu, scene):
 
 def test_render_beyond_max_time_is_refused_before_it_starts(gpu):
     with pytest.raises(InputError, match=r"^max_time_s: the render would take about .* s, more than 0.5 s"):
-        render("cornell", spp=65536, width=512, height=512, max_time_s=0.5)
+        render("cornell", make_lens(make_aperture("circle"), fstop=2.8, focus_distance_m=CORNELL_FOCUS_M),
+               make_settings(512, 512, 65536), max_time_s=0.5)
 
 
 def test_cli_long_render_is_refused_with_its_estimate(tmp_path, gpu):

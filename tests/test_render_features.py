@@ -22,7 +22,7 @@ import pytest
 
 from bokehfit.apertures import make_aperture
 from bokehfit.kernels import render_kernel
-from bokehfit.scene import Material, PointLight, PointScene, Pose, Quad, Scene, render
+from bokehfit.scene import Material, PointLight, PointScene, Pose, Quad, Scene, build_scene, make_lens, make_settings, render
 from test_mask import ring_mask
 
 pytestmark = pytest.mark.gpu
@@ -31,6 +31,9 @@ FRAME = 96
 SENSOR_WIDTH_MM = 36.0
 #: 100 mm at f/1.5 focused at 0.5 m: a light at infinity (or at 0.25 m) is a 35.6 px disc.
 LENS = dict(focal_length_mm=100.0, fstop=1.5, focus_distance_m=0.5)
+#: The Cornell box's own focus distance (the command line's default).
+CORNELL_FOCUS_M = build_scene("cornell").default_focus_m
+CIRCLE = make_aperture("circle")
 FAR, NEAR = math.inf, 0.25
 DIAMETER_PX = (100.0**2 / 1.5) / 500.0 * FRAME / SENSOR_WIDTH_MM
 SPP = 32
@@ -38,10 +41,10 @@ SPP = 32
 MASK_LEVEL = 0.5
 
 
-def render_light(x=0.5, y=0.5, depth=FAR, *, shape="circle", spp=SPP, **features) -> np.ndarray:
-    """Linear RGB image of one point light at (x, y) (fractions of the frame) and ``depth``."""
+def render_light(x=0.5, y=0.5, depth=FAR, *, aperture=CIRCLE, spp=SPP, seed=0) -> np.ndarray:
+    """Linear RGB image of one point light at (x, y) (fractions of the frame) and ``depth`` through ``aperture``."""
     scene = PointScene("point", (PointLight(x, y, depth),))
-    return render(scene, shape=shape, spp=spp, width=FRAME, height=FRAME, **LENS, **features).image
+    return render(scene, make_lens(aperture, **LENS), make_settings(FRAME, FRAME, spp, seed)).image
 
 
 def plateau_mask(image: np.ndarray) -> np.ndarray:
@@ -75,9 +78,9 @@ def field_position(x: float, y: float) -> tuple[float, float]:
 
 
 def test_roundness_one_makes_a_triangle_round(gpu):
-    image = render_light(shape="triangle", roundness=1.0).mean(axis=-1)
-    straight = render_light(shape="triangle").mean(axis=-1)
-    circle = plateau_mask(render_kernel("circle", 0.0, DIAMETER_PX, FRAME, method="exact"))
+    image = render_light(aperture=make_aperture("triangle", roundness=1.0)).mean(axis=-1)
+    straight = render_light(aperture=make_aperture("triangle")).mean(axis=-1)
+    circle = plateau_mask(render_kernel(make_aperture("circle", 0.0), DIAMETER_PX, FRAME, method="exact"))
     assert iou(plateau_mask(image), circle) >= 0.95
     assert iou(plateau_mask(straight), circle) < 0.85, "the straight triangle must differ from the circle"
 
@@ -85,27 +88,27 @@ def test_roundness_one_makes_a_triangle_round(gpu):
 def test_rounded_blades_match_the_exact_outline(gpu):
     """A 9-blade lens at roundness 0.5, against the area coverage of the model's own outline."""
     aperture = make_aperture("ngon", 10.0, blades=9, roundness=0.5)
-    image = render_light(shape="ngon", blades=9, angle_deg=10.0, roundness=0.5).mean(axis=-1)
+    image = render_light(aperture=make_aperture("ngon", 10.0, blades=9, roundness=0.5)).mean(axis=-1)
     kernel = render_kernel(aperture, diameter_px=DIAMETER_PX, size=FRAME, method="exact")
     assert iou(plateau_mask(image), plateau_mask(kernel)) >= 0.97
 
 
 def test_squeeze_makes_the_disc_taller_than_wide(gpu):
-    _, sx, sy = moments(render_light(squeeze=1.5).mean(axis=-1))
+    _, sx, sy = moments(render_light(aperture=make_aperture("circle", squeeze=1.5)).mean(axis=-1))
     # x/√s and y·√s: the standard deviations' ratio is the squeeze itself.
     assert sy / sx == pytest.approx(1.5, rel=0.03)
 
 
 def test_vignetting_cuts_a_corner_disc_and_not_the_centre(gpu):
     vignetting = dict(radius=1.0, shift=2.0)
-    centre_plain = render_light(shape="circle")
-    centre_cut = render_light(shape="circle", vignetting=vignetting)
+    centre_plain = render_light(aperture=CIRCLE)
+    centre_cut = render_light(aperture=make_aperture("circle", vignetting=vignetting))
     # At the centre the barrel (radius R0, centred on the axis) is the circle itself: nothing is cut.
     assert centre_cut.sum() == pytest.approx(centre_plain.sum(), rel=1e-3)
 
     x, y = 0.72, 0.28  # up and to the right; the disc stays inside the frame
-    corner_plain = render_light(x, y, shape="circle")
-    corner_cut = render_light(x, y, shape="circle", vignetting=vignetting)
+    corner_plain = render_light(x, y, aperture=CIRCLE)
+    corner_cut = render_light(x, y, aperture=make_aperture("circle", vignetting=vignetting))
     passed = corner_cut.sum() / corner_plain.sum()
     expected = make_aperture("circle", vignetting=vignetting).area(field_position(x, y))
     assert expected < 0.9, "the case must cut the disc"
@@ -120,8 +123,8 @@ def test_vignetting_cuts_a_corner_disc_and_not_the_centre(gpu):
 def test_vignetting_of_a_near_disc_is_turned_by_180_degrees(gpu):
     x, y = 0.72, 0.28
     vignetting = dict(radius=1.0, shift=2.0)
-    plain = render_light(x, y, NEAR, shape="circle")
-    cut = render_light(x, y, NEAR, shape="circle", vignetting=vignetting)
+    plain = render_light(x, y, NEAR, aperture=CIRCLE)
+    cut = render_light(x, y, NEAR, aperture=make_aperture("circle", vignetting=vignetting))
     assert cut.sum() / plain.sum() == pytest.approx(make_aperture("circle", vignetting=vignetting).area(field_position(x, y)), abs=0.02)
     shift, _, _ = moments(cut.mean(axis=-1))
     plain_centre, _, _ = moments(plain.mean(axis=-1))
@@ -139,7 +142,7 @@ def ring_and_centre(channel: np.ndarray) -> tuple[float, float]:
 @pytest.mark.parametrize("depth,bright_rim", [(FAR, True), (NEAR, False)], ids=["far", "near"])
 def test_rim_brightens_the_rim_of_a_far_disc_and_the_centre_of_a_near_one(gpu, depth, bright_rim):
     rim = 0.6
-    centre, ring = ring_and_centre(render_light(depth=depth, rim=rim).mean(axis=-1))
+    centre, ring = ring_and_centre(render_light(depth=depth, aperture=make_aperture("circle", rim=rim)).mean(axis=-1))
     # The profile 1 + rim·(2ρ² − 1): about 0.46 at the centre and 1.3 on the ring (far); mirrored near.
     assert (ring > 2.0 * centre) if bright_rim else (centre > 2.0 * ring), (centre, ring)
     flat_centre, flat_ring = ring_and_centre(render_light(depth=depth).mean(axis=-1))
@@ -149,7 +152,7 @@ def test_rim_brightens_the_rim_of_a_far_disc_and_the_centre_of_a_near_one(gpu, d
 @pytest.mark.parametrize("depth,sign", [(FAR, 1.0), (NEAR, -1.0)], ids=["far", "near"])
 def test_chromatic_scales_the_red_and_blue_discs(gpu, depth, sign):
     red, blue = 0.1, -0.1
-    image = render_light(depth=depth, chromatic=dict(red=red, blue=blue))
+    image = render_light(depth=depth, aperture=make_aperture("circle", chromatic=dict(red=red, blue=blue)))
     size = [radius_of_gyration(image[..., c]) for c in range(3)]
     assert size[0] / size[1] == pytest.approx(1.0 + sign * red, rel=0.01)
     assert size[2] / size[1] == pytest.approx(1.0 + sign * blue, rel=0.01)
@@ -161,9 +164,10 @@ def test_chromatic_scales_the_red_and_blue_discs(gpu, depth, sign):
 
 
 def test_path_traced_vignetting_darkens_the_corners_more_than_the_centre(gpu):
-    settings = dict(shape="circle", fstop=1.4, spp=16, width=48, height=48)
-    plain = render("cornell", **settings).image.mean(axis=-1)
-    cut = render("cornell", vignetting=dict(radius=1.0, shift=3.0), **settings).image.mean(axis=-1)
+    settings = make_settings(48, 48, 16)
+    cut_aperture = make_aperture("circle", vignetting=dict(radius=1.0, shift=3.0))
+    plain = render("cornell", make_lens(CIRCLE, fstop=1.4, focus_distance_m=CORNELL_FOCUS_M), settings).image.mean(axis=-1)
+    cut = render("cornell", make_lens(cut_aperture, fstop=1.4, focus_distance_m=CORNELL_FOCUS_M), settings).image.mean(axis=-1)
     rows, cols = np.indices(plain.shape)
     q = np.hypot(cols + 0.5 - 24.0, rows + 0.5 - 24.0) / math.hypot(24.0, 24.0)
     centre, corners = q < 0.15, q > 0.8
@@ -179,9 +183,10 @@ def test_path_traced_colour_and_rim_keep_the_light(gpu):
     Seeds 0 to 3 came within 4.5 % per channel at this budget (the Cornell box's
     caustic-free but noisy light); the bound leaves room for that noise.
     """
-    settings = dict(shape="hexagon", fstop=2.0, spp=1024, width=24, height=24)
-    plain = render("cornell", **settings)
-    featured = render("cornell", chromatic=dict(red=0.05, blue=-0.05), rim=0.5, **settings)
+    settings = make_settings(24, 24, 1024)
+    featured_aperture = make_aperture("hexagon", chromatic=dict(red=0.05, blue=-0.05), rim=0.5)
+    plain = render("cornell", make_lens(make_aperture("hexagon"), fstop=2.0, focus_distance_m=CORNELL_FOCUS_M), settings)
+    featured = render("cornell", make_lens(featured_aperture, fstop=2.0, focus_distance_m=CORNELL_FOCUS_M), settings)
     assert featured.nonfinite_pixels == 0
     mean_plain = plain.image.reshape(-1, 3).mean(axis=0)
     mean_featured = featured.image.reshape(-1, 3).mean(axis=0)
@@ -206,7 +211,8 @@ def test_path_traced_colour_flips_across_the_focus_plane(gpu, depth, sign):
     far beyond the noise of the disc's moments at this budget.
     """
     scene = glowing_square(depth, 0.04 * depth / 2.0)
-    image = render(scene, shape="circle", spp=256, width=FRAME, height=FRAME, chromatic=dict(red=0.3, blue=-0.3), **LENS).image
+    lens = make_lens(make_aperture("circle", chromatic=dict(red=0.3, blue=-0.3)), **LENS)
+    image = render(scene, lens, make_settings(FRAME, FRAME, 256)).image
     red, green, blue = (radius_of_gyration(image[..., c]) for c in range(3))
     if sign > 0:
         assert red > 1.15 * green > 1.15**2 * blue, (red, green, blue)
@@ -237,9 +243,9 @@ def normalised(image: np.ndarray) -> np.ndarray:
 def test_mask_splat_matches_the_exact_mask_kernel(gpu, depth, side):
     """Points renderer: the disc of a grey, asymmetric mask at 30° is its exact kernel, turned by 180° when near."""
     mask = grey_mask()
-    image = render_light(depth=depth, shape="mask", mask=mask, angle_deg=30.0).mean(axis=-1)
-    kernel = render_kernel("mask", 30.0, DIAMETER_PX, FRAME, mask=mask, side=side)
-    other = render_kernel("mask", 30.0, DIAMETER_PX, FRAME, mask=mask, side="near" if side == "far" else "far")
+    image = render_light(depth=depth, aperture=make_aperture("mask", 30.0, mask=mask)).mean(axis=-1)
+    kernel = render_kernel(make_aperture("mask", 30.0, mask=mask), DIAMETER_PX, FRAME, side=side)
+    other = render_kernel(make_aperture("mask", 30.0, mask=mask), DIAMETER_PX, FRAME, side="near" if side == "far" else "far")
     assert iou(plateau_mask(image), plateau_mask(kernel)) >= 0.95
     error = np.abs(normalised(image) - kernel).sum()
     assert error < SPLAT_L1, error
@@ -248,10 +254,9 @@ def test_mask_splat_matches_the_exact_mask_kernel(gpu, depth, side):
 
 def test_rectangle_mask_splats_as_the_slit(gpu):
     """Points renderer: a mask of equal cells is its rectangle, the slit: the same image to far below the noise."""
-    mask = render_light(shape="mask", mask=RECTANGLE_MASK, angle_deg=20.0).mean(axis=-1)
-    slit = render_light(angle_deg=20.0, **RECTANGLE_SLIT).mean(axis=-1)
-    reseeded = render(PointScene("point", (PointLight(0.5, 0.5, FAR),)), angle_deg=20.0, spp=SPP, width=FRAME,
-                      height=FRAME, seed=1, **RECTANGLE_SLIT, **LENS).image.mean(axis=-1)
+    mask = render_light(aperture=make_aperture("mask", 20.0, mask=RECTANGLE_MASK)).mean(axis=-1)
+    slit = render_light(aperture=make_aperture(angle_deg=20.0, **RECTANGLE_SLIT)).mean(axis=-1)
+    reseeded = render_light(aperture=make_aperture(angle_deg=20.0, **RECTANGLE_SLIT), seed=1).mean(axis=-1)
     noise = np.abs(normalised(slit) - normalised(reseeded)).sum()
     assert noise > 0.02, "two seeds must differ"
     assert np.abs(normalised(mask) - normalised(slit)).sum() < 0.25 * noise
@@ -267,12 +272,13 @@ def test_path_traced_rectangle_mask_is_the_slit(gpu, depth):
     at 64 spp).
     """
     scene = glowing_square(depth, 0.04 * depth / 2.0)
-    settings = dict(spp=64, width=FRAME, height=FRAME, **LENS)
-    mask = render(scene, shape="mask", mask=RECTANGLE_MASK, angle_deg=20.0, **settings)
+    settings, reseeding = make_settings(FRAME, FRAME, 64), make_settings(FRAME, FRAME, 64, seed=1)
+    mask = render(scene, make_lens(make_aperture("mask", 20.0, mask=RECTANGLE_MASK), **LENS), settings)
     assert mask.lens.aperture.mask is not None and mask.nonfinite_pixels == 0
-    slit = render(scene, angle_deg=20.0, **RECTANGLE_SLIT, **settings).image.mean(axis=-1)
-    reseeded = render(scene, angle_deg=20.0, seed=1, **RECTANGLE_SLIT, **settings).image.mean(axis=-1)
-    turned = render(scene, angle_deg=110.0, **RECTANGLE_SLIT, **settings).image.mean(axis=-1)
+    slit_lens = make_lens(make_aperture(angle_deg=20.0, **RECTANGLE_SLIT), **LENS)
+    slit = render(scene, slit_lens, settings).image.mean(axis=-1)
+    reseeded = render(scene, slit_lens, reseeding).image.mean(axis=-1)
+    turned = render(scene, make_lens(make_aperture(angle_deg=110.0, **RECTANGLE_SLIT), **LENS), settings).image.mean(axis=-1)
     image = mask.image.mean(axis=-1)
     noise = np.abs(normalised(slit) - normalised(reseeded)).sum()
     assert np.abs(normalised(image) - normalised(slit)).sum() < 0.25 * noise
@@ -285,8 +291,10 @@ def test_path_traced_grey_mask_keeps_the_light(gpu):
     Seeds 0 to 2 came within 0.7 % per channel; that the mask is drawn, not a
     stub, is what the glowing square above shows.
     """
-    settings = dict(fstop=2.0, spp=256, width=24, height=24)
-    plain = render("cornell", shape="circle", **settings).image.reshape(-1, 3).mean(axis=0)
-    masked = render("cornell", shape="mask", mask=grey_mask(), angle_deg=15.0, **settings)
+    settings = make_settings(24, 24, 256)
+    plain = render("cornell", make_lens(CIRCLE, fstop=2.0, focus_distance_m=CORNELL_FOCUS_M), settings)
+    plain = plain.image.reshape(-1, 3).mean(axis=0)
+    mask_lens = make_lens(make_aperture("mask", 15.0, mask=grey_mask()), fstop=2.0, focus_distance_m=CORNELL_FOCUS_M)
+    masked = render("cornell", mask_lens, settings)
     assert masked.nonfinite_pixels == 0
     np.testing.assert_allclose(masked.image.reshape(-1, 3).mean(axis=0), plain, rtol=0.03)

@@ -73,9 +73,10 @@ def test_check_accepts_the_bounds_it_states_and_refuses_just_beyond(quantity):
         (lambda: coc_mm(2.0, 50.0, 2.0, -3.0), r"light_distance_m must be a number in \(0, .*\] m or inf \(got -3.0\)"),
         (lambda: fstop_from_coc(0.5, 50.0, 1e300, 10.0), r"focus_distance_m must be a finite number in \[0.001, 1e\+06\] m"),
         (lambda: pixel_pitch_mm(1e308, 6000, 4000), r"sensor_width_mm must be a finite number in \[1, 300\] mm"),
-        (lambda: make_lens(fstop=2.0, focus_distance_m=0.7, focal_length_mm=1e-300), "focal_length_mm"),
-        (lambda: make_lens(fstop=2.0, focus_distance_m=0.7, sensor_width_mm=1e308), "sensor_width_mm"),
-        (lambda: make_lens(fstop=2.0, focus_distance_m=0.04, focal_length_mm=50.0), "focus_distance_m must be longer than the focal length"),
+        (lambda: make_lens(make_aperture("circle"), fstop=2.0, focus_distance_m=0.7, focal_length_mm=1e-300), "focal_length_mm"),
+        (lambda: make_lens(make_aperture("circle"), fstop=2.0, focus_distance_m=0.7, sensor_width_mm=1e308), "sensor_width_mm"),
+        (lambda: make_lens(make_aperture("circle"), fstop=2.0, focus_distance_m=0.04, focal_length_mm=50.0),
+         "focus_distance_m must be longer than the focal length"),
         (lambda: make_settings(64, 64, 2**24), r"spp must be an integer in \[1, 65536\] \(got 16777216\)"),
         (lambda: tone_map_srgb8(np.zeros((2, 2, 3)), 1e308), r"exposure_ev must be a finite number in \[-30, 30\] EV"),
         (lambda: parse_depths("1,-3"), r"light depths must be a number in \(0, .*\] m or inf \(got -3.0\)"),
@@ -136,7 +137,9 @@ def test_one_shape_parser_for_every_entry_point():
     assert parse_shape("ngon(9)") == parse_shape(" NGON( 9 ) ") == ("ngon", 9)
     assert parse_shape("hexagon") == ("hexagon", None)
     assert make_aperture("ngon(9)", 10.0) == make_aperture("ngon", 10.0, blades=9)
-    np.testing.assert_array_equal(render_kernel("ngon(9)", 5.0, 20.0, 32), render_kernel("ngon", 5.0, 20.0, 32, blades=9))
+    np.testing.assert_array_equal(
+        render_kernel(make_aperture("ngon(9)", 5.0), 20.0, 32), render_kernel(make_aperture("ngon", 5.0, blades=9), 20.0, 32)
+    )
     with pytest.raises(InputError, match="blades must be 9 or omitted"):
         make_aperture("ngon(9)", blades=8)
     with pytest.raises(InputError, match=r"blades must be an integer from 3 to 64 .*ngon\(99\)"):

@@ -159,7 +159,7 @@ def test_params_are_the_lens_values(server):
     answer = json.loads(body)
     values = answer["values"]
     assert set(values) == {name for name, _ in RENDER_PARAMS.fields}
-    lens = make_lens("ngon", 100.0, fstop=2.0, focus_distance_m=0.9, blades=7)
+    lens = make_lens(make_aperture("ngon", 100.0, blades=7), fstop=2.0, focus_distance_m=0.9)
     assert values["shape"] == SHAPES["ngon"].shader_id and values["blades"] == 7
     assert values["aperture_scale"] == f32(lens.aperture_scale_m)
     assert values["focus_distance"] == f32(0.9)
@@ -197,10 +197,11 @@ def test_params_carry_the_real_lens_features(server):
     assert status == 200
     answer = json.loads(body)
     values = answer["values"]
-    lens = make_lens(
-        "ngon", 10.0, fstop=2.0, focus_distance_m=0.9, blades=9, roundness=0.4, squeeze=1.3, rim=0.5,
+    aperture = make_aperture(
+        "ngon", 10.0, blades=9, roundness=0.4, squeeze=1.3, rim=0.5,
         vignetting=dict(radius=1.2, shift=0.8), chromatic=dict(red=0.03, blue=-0.02),
     )
+    lens = make_lens(aperture, fstop=2.0, focus_distance_m=0.9)
     for name, value in lens.aperture.shader_params().items():
         assert values[name] == pytest.approx(np.float32(value).tolist()), name
     assert answer["lens"]["vignetting"] == {"radius": 1.2, "shift": 0.8}
@@ -245,14 +246,14 @@ def test_unknown_paths_and_hosts_are_refused(server):
 
 
 def test_depth_of_field_limits_blur_by_the_criterion():
-    lens = make_lens("circle", fstop=2.8, focus_distance_m=0.7)
+    lens = make_lens(make_aperture("circle"), fstop=2.8, focus_distance_m=0.7)
     dof = depth_of_field(lens, 512, 512)
     assert dof.coc_mm == pytest.approx(math.hypot(36.0, 36.0) / 1500)
     assert dof.near_m < 0.7 < dof.far_m
     assert lens.coc_mm(dof.near_m) == pytest.approx(dof.coc_mm)
     assert lens.coc_mm(dof.far_m) == pytest.approx(dof.coc_mm)
     assert lens.coc_mm(math.inf) == pytest.approx(dof.coc_mm * dof.hyperfocal_m / 0.7)
-    beyond = depth_of_field(make_lens("circle", fstop=16, focus_distance_m=5.0), 512, 512)
+    beyond = depth_of_field(make_lens(make_aperture("circle"), fstop=16, focus_distance_m=5.0), 512, 512)
     assert beyond.far_m == math.inf and beyond.to_json()["far_m"] is None
 
 
@@ -613,9 +614,9 @@ def test_shape_changes_the_render_and_nothing_else_does(browser, server):
 
 def test_browser_traces_the_same_paths_as_python(browser, server, gpu):
     """The page's linear frame against ``bokehfit.scene.render`` on lavapipe: same shader, same uniforms."""
-    from bokehfit.scene import render
+    from bokehfit.scene import make_settings, render
 
-    settings = {"shape": "ngon", "blades": 7, "angle_deg": 10.0, "fstop": 1.4}
+    lens = make_lens(make_aperture("ngon", 10.0, blades=7), fstop=1.4, focus_distance_m=cornell_box().default_focus_m)
     page = open_page(browser, server, "max_spp=4&shape=ngon&blades=7&angle=10&fstop=1.4")
     try:
         page.wait_for_function("window.bokehfitViewer.spp === 4", timeout=PAGE_TIMEOUT_MS)
@@ -624,7 +625,7 @@ def test_browser_traces_the_same_paths_as_python(browser, server, gpu):
         page.close()
     assert frame["samples"] == 4
     browser_image = np.asarray(frame["rgb"], dtype=np.float32).reshape(frame["height"], frame["width"], 3)
-    python_image = render("cornell", spp=4, width=frame["width"], height=frame["height"], **settings).image
+    python_image = render("cornell", lens, make_settings(frame["width"], frame["height"], 4)).image
     same = (np.abs(browser_image - python_image).max(axis=-1) <= SAME_PIXEL_TOLERANCE).mean()
     assert same >= MIN_SAME_PIXEL_FRACTION, f"only {same:.0%} of the pixels agree with the Python renderer"
     np.testing.assert_allclose(browser_image.mean(axis=(0, 1)), python_image.mean(axis=(0, 1)), rtol=0.05)
@@ -656,7 +657,7 @@ def test_the_page_shows_its_frame_through_the_package_tone_map(browser, server):
 
 def test_uploaded_mask_traces_the_same_paths_as_python(browser, server, gpu, tmp_path):
     """A PNG in the mask input: the server builds its table, the page binds it, and the frame is Python's."""
-    from bokehfit.scene import render
+    from bokehfit.scene import make_settings, render
 
     transmission = np.zeros((9, 9))
     transmission[1:8, 2:7] = 1.0
@@ -684,7 +685,8 @@ def test_uploaded_mask_traces_the_same_paths_as_python(browser, server, gpu, tmp
     assert frame["samples"] == 4
     shape = (frame["height"], frame["width"], 3)
     browser_image = np.asarray(frame["rgb"], dtype=np.float32).reshape(shape)
-    python_image = render("cornell", shape="mask", mask=str(path), angle_deg=30.0, fstop=1.4, spp=4, width=frame["width"], height=frame["height"]).image
+    lens = make_lens(make_aperture("mask", 30.0, mask=str(path)), fstop=1.4, focus_distance_m=cornell_box().default_focus_m)
+    python_image = render("cornell", lens, make_settings(frame["width"], frame["height"], 4)).image
     same = (np.abs(browser_image - python_image).max(axis=-1) <= SAME_PIXEL_TOLERANCE).mean()
     assert same >= MIN_SAME_PIXEL_FRACTION, f"only {same:.0%} of the pixels agree with the Python renderer"
     before = np.asarray(circle["rgb"], dtype=np.float32).reshape(shape)

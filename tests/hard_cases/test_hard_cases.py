@@ -34,13 +34,13 @@ OUTLINE_SHAPE_PARAMS = [(s, p) for s, p in SHAPE_PARAMS if not SHAPES[s].tabulat
 
 
 def test_coc_of_a_third_of_a_pixel_is_one_sharp_kernel():
-    kernel = render_kernel("hexagon", 0.0, 0.3, 9)  # odd frame: the light on the centre pixel
+    kernel = render_kernel(make_aperture("hexagon", 0.0), 0.3, 9)  # odd frame: the light on the centre pixel
     assert kernel.sum() == pytest.approx(1.0, abs=1e-6)
     assert kernel[4, 4] == pytest.approx(1.0, abs=1e-6)
 
 
 def test_coc_of_2000_px_in_a_2100_px_frame():
-    kernel = compute_kernel("circle", 0.0, 2000.0, 2100)
+    kernel = compute_kernel(make_aperture("circle", 0.0), 2000.0, 2100)
     assert kernel.clipped_fraction == 0.0
     assert np.isfinite(kernel.image).all() and kernel.image.min() >= 0.0
     assert kernel.image.sum() == pytest.approx(1.0, abs=1e-5)
@@ -49,7 +49,7 @@ def test_coc_of_2000_px_in_a_2100_px_frame():
 
 def test_coc_of_2000_px_clipped_by_a_small_frame_says_so():
     with pytest.warns(KernelClippedWarning):
-        kernel = compute_kernel("star", 3.0, 2000.0, 64)
+        kernel = compute_kernel(make_aperture("star", 3.0), 2000.0, 64)
     assert kernel.clipped_fraction > 0.99 and kernel.image.sum() == pytest.approx(1.0, abs=1e-6)
 
 
@@ -60,7 +60,9 @@ def test_angles_at_the_symmetry_plus_and_minus_a_microdegree(shape, params):
         canonical = make_aperture(shape, angle, **params).canonical_angle_deg
         assert canonical is None or 0.0 <= canonical < symmetry
         np.testing.assert_allclose(
-            render_kernel(shape, angle, 24.0, 40, **params), render_kernel(shape, 0.0, 24.0, 40, **params), atol=1e-6
+            render_kernel(make_aperture(shape, angle, **params), 24.0, 40),
+            render_kernel(make_aperture(shape, 0.0, **params), 24.0, 40),
+            atol=1e-6,
         )
 
 
@@ -88,8 +90,8 @@ def test_top_of_the_unit_square_in_every_wgsl_sampler(gpu, run_wgsl_sampler, sha
 @pytest.mark.parametrize("tolerance", [3e-2, 1e-2])
 @pytest.mark.parametrize("method", ["mc", "raster"])
 def test_planned_sample_counts_meet_the_tolerance(gpu, method, tolerance):
-    exact = render_kernel("star", 11.0, 48.0, 80).astype(np.float64)
-    kernel = compute_kernel("star", 11.0, 48.0, 80, method=method, tolerance=tolerance, seed=5)
+    exact = render_kernel(make_aperture("star", 11.0), 48.0, 80).astype(np.float64)
+    kernel = compute_kernel(make_aperture("star", 11.0), 48.0, 80, method=method, tolerance=tolerance, seed=5)
     assert np.abs(kernel.image - exact).sum() <= tolerance
 
 

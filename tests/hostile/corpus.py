@@ -674,14 +674,18 @@ def _cases_outputs() -> list[Case]:
     return rows
 
 
+#: What the kernel cases import: the aperture is built once, then passed whole.
+_KERNEL_API = "from bokehfit.apertures import make_aperture; from bokehfit.kernels import render_kernel; "
+
+
 def _cases_api() -> list[Case]:
     rows = [
         ("api_render_kernel_tolerance_1e-300",
-         "from bokehfit.kernels import render_kernel; render_kernel('hexagon', 0.0, 10.0, 32, tolerance=1e-300)"),
+         _KERNEL_API + "render_kernel(make_aperture('hexagon'), 10.0, 32, tolerance=1e-300)"),
         ("api_render_kernel_diameter_nan",
-         "from bokehfit.kernels import render_kernel; render_kernel('hexagon', 0.0, float('nan'), 32)"),
+         _KERNEL_API + "render_kernel(make_aperture('hexagon'), float('nan'), 32)"),
         ("api_render_kernel_size_float",
-         "from bokehfit.kernels import render_kernel; render_kernel('hexagon', 0.0, 10.0, 32.5)"),
+         _KERNEL_API + "render_kernel(make_aperture('hexagon'), 10.0, 32.5)"),
         ("api_find_discs_empty_array",
          "import numpy as np; from bokehfit.discs import find_discs; find_discs(np.zeros((0, 0), np.float32))"),
         ("api_find_discs_nan_array",
