@@ -357,7 +357,7 @@ def test_page_draws_the_matched_kernel_with_the_wgsl_renderer(browser, server, a
 
     from bokehfit.apertures import make_aperture
     from bokehfit.fit.crop import field_position
-    from bokehfit.fit.pixels import model_window
+    from bokehfit.fit.disc_model import model_window
     from bokehfit.kernels import render_kernel
     from bokehfit.view import settings_from_compare
     from test_view import _need

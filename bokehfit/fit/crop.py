@@ -39,11 +39,11 @@ if TYPE_CHECKING:
     from bokehfit.fit.pixels import PixelFit
 
 __all__ = [
+    "MAX_FIT_SIDE",
     "DiscCrop",
     "FullDisc",
     "crop_disc",
     "field_position",
-    "MAX_FIT_SIDE",
 ]
 
 #: Largest crop side fitted at full resolution; larger discs are reduced first.

@@ -2,18 +2,12 @@
 
 Notes
 -----
-The model of a disc's crop is
-
-    I(x) = b + (p − b) · (G_σ ⊗ K)(x),
-
-with K the light of the aperture on each pixel (``bokehfit.kernels.exact``:
-exact coverage, weighted by the ``rim`` profile where the aperture has one,
-clipped by the ``vignetting`` at the disc's place in the frame) at centre c
-and equal-area diameter d, and G_σ a Gaussian edge blur (sensor,
-demosaicing, JPEG). Least squares (trust-region reflective, bounded) fits c,
-d, σ and the aperture's own :attr:`~bokehfit.apertures.Aperture.parameters`
-(the angle, the slit's aspect, the roundness, ...), solving for b and p at
-every step (they enter linearly: variable projection).
+Least squares (trust-region reflective, bounded) fits a disc's centre c,
+equal-area diameter d, edge blur σ and the aperture's own
+:attr:`~bokehfit.apertures.Aperture.parameters` (the angle, the slit's aspect,
+the roundness, ...) to the model of its crop, I(x) = b + (p − b) · (G_σ ⊗ K)(x)
+(:mod:`bokehfit.fit.disc_model`), solving for b and p at every step (they
+enter linearly: variable projection).
 
 **Clipped pixels are censored, not lost.** A pixel clipped in the source (any
 channel at the file's top value) says only that the light there was at least
@@ -41,24 +35,20 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 from scipy.optimize import least_squares
 
-from bokehfit.apertures import Aperture, ParameterSpec, image_to_aperture
+from bokehfit.apertures import Aperture, ParameterSpec
 from bokehfit.discs import Disc
 from bokehfit.fit.crop import DiscCrop, crop_disc
+from bokehfit.fit.disc_model import BLUR_RANGE, render_disc_model
 from bokehfit.fit.families import Family
-from bokehfit.kernels.exact import coverage, rim_coverage
 
 __all__ = [
     "JointFit",
     "PixelFit",
-    "disc_profile",
     "fit_disc_pixels",
     "fit_discs",
-    "model_window",
-    "render_disc_model",
 ]
 
 #: Most function evaluations per fit.
@@ -68,8 +58,6 @@ MAX_EVALUATIONS = 200
 TOLERANCE = 1e-6
 #: Widest slit fitted: at aspect 1 the slit is the square, which has a model of its own.
 MAX_SLIT_ASPECT = 0.8
-#: Edge-blur bounds, crop pixels.
-BLUR_RANGE = (0.05, 6.0)
 #: The parameters of every disc, first in the fit's vector (crop units; the centre in crop pixel coordinates).
 DISC_NAMES = ("cx", "cy", "diameter_px", "blur_px")
 #: Fit bounds narrower than :attr:`ParameterSpec.bounds`, by parameter name.
@@ -77,11 +65,6 @@ FIT_BOUNDS = {"aspect": (0.01, MAX_SLIT_ASPECT), "vignetting_radius": (1.0, 4.0)
               "squeeze": (0.25, 4.0)}
 #: Parameters searched within a factor of 2 of their start (scale factors, not offsets).
 RELATIVE_PARAMETERS = ("aspect", "squeeze")
-#: Sub-pixels a side for the rim profile in the fit (the edge blur hides finer detail).
-RIM_FIT_SUPERSAMPLE = 3
-#: Bytes of coverages a fit keeps for its next steps (:func:`disc_profile`'s ``covers``): a
-#: Jacobian's blur column comes a few steps after the point it is taken at.
-COVERS_BYTES = 32 << 20
 #: A saturated disc's plateau is searched up to this many times the clip level.
 MAX_PLATEAU_OVER_CLIP = 50.0
 
@@ -132,62 +115,6 @@ class PixelFit:
         return n * math.log(max(self.rss, 1e-300) / n) + self.parameter_count * math.log(n)
 
 
-def disc_profile(
-    aperture: Aperture,
-    disc: Mapping[str, float],
-    size: int,
-    field_position: Sequence[float] | None = None,
-    covers: dict | None = None,
-) -> np.ndarray:
-    """The blurred unit-contrast disc (size × size) of ``aperture``; ``disc`` holds the :data:`DISC_NAMES`
-    in crop units, the centre in crop pixel coordinates. ``field_position`` places a vignetted aperture.
-
-    ``covers``, where given, is the caller's memo of the unblurred coverages by their geometry
-    (aperture, size, centre, diameter, field position): a fit's steps that change only the blur
-    or the levels (a Jacobian's blur column, a plateau's) reuse the coverage instead of
-    integrating it again. It keeps the latest, about ``COVERS_BYTES`` in all."""
-    centre = (size - 1) / 2.0
-    where = None if aperture.vignetting is None else field_position
-    key = (aperture, size, disc["cx"], disc["cy"], disc["diameter_px"], None if where is None else tuple(where))
-    cover = None if covers is None else covers.get(key)
-    if cover is None:
-        scale = max(disc["diameter_px"], 1e-3) * math.sqrt(math.pi) / 2.0
-        (offset_xy,) = image_to_aperture([[disc["cy"] - centre, disc["cx"] - centre]])
-        if aperture.rim != 0.0:
-            cover, _ = rim_coverage(aperture, scale, size, field_position=where, supersample=RIM_FIT_SUPERSAMPLE,
-                                    max_chord_error=1e-4, offset_xy=tuple(offset_xy))
-        else:
-            cover = coverage(_outline(aperture, where, covers), scale, size, offset_xy=tuple(offset_xy))
-        cover = cover.astype(np.float32)
-        if covers is not None:
-            covers[key] = cover
-            while (len(covers) - (_OUTLINES in covers)) * cover.nbytes > COVERS_BYTES and len(covers) > 2:
-                del covers[next(k for k in covers if k != _OUTLINES)]  # the oldest
-    return cv2.GaussianBlur(cover, (0, 0), max(disc["blur_px"], BLUR_RANGE[0]), borderType=cv2.BORDER_REPLICATE)
-
-
-#: Key of :func:`disc_profile`'s ``covers`` under which the outlines of the latest apertures are kept.
-_OUTLINES = "outlines"
-#: Outlines kept there: a fit's steps that move only a disc (its centre, size or blur) reuse the
-#: aperture's outline, which for a vignetted one (the shape clipped by the barrel) costs more
-#: than the coverage.
-OUTLINES_KEPT = 32
-
-
-def _outline(aperture: Aperture, where: tuple[float, float] | None, covers: dict | None):
-    """``aperture.outline(where)``, from the memo in ``covers`` where there is one."""
-    if covers is None:
-        return aperture.outline(where)
-    outlines = covers.setdefault(_OUTLINES, {})
-    key = (aperture, None if where is None else tuple(where))
-    outline = outlines.get(key)
-    if outline is None:
-        outline = outlines[key] = aperture.outline(where)
-        if len(outlines) > OUTLINES_KEPT:
-            del outlines[next(iter(outlines))]  # the oldest
-    return outline
-
-
 def _search_bounds(parameter: ParameterSpec, start: float) -> tuple[float, float, float]:
     """(start, lower, upper) of one aperture parameter for the fit.
 
@@ -204,52 +131,6 @@ def _search_bounds(parameter: ParameterSpec, start: float) -> tuple[float, float
     return start, low, high
 
 
-def _levels(profile: np.ndarray, data: np.ndarray) -> tuple[float, float]:
-    """Background and plateau that fit ``data`` best for this profile (2×2 linear least squares)."""
-    ones = 1.0 - profile
-    a11, a12, a22 = float(ones @ ones), float(ones @ profile), float(profile @ profile)
-    r1, r2 = float(ones @ data), float(profile @ data)
-    det = a11 * a22 - a12 * a12
-    if abs(det) < 1e-12:
-        return float(data.mean()), float(data.mean())
-    return (a22 * r1 - a12 * r2) / det, (a11 * r2 - a12 * r1) / det
-
-
-def _background(profile: np.ndarray, data: np.ndarray, plateau: float) -> float:
-    """The background that fits ``data`` best for this profile and a given plateau."""
-    ones = 1.0 - profile
-    weight = float(ones @ ones)
-    return float(ones @ (data - plateau * profile)) / weight if weight > 1e-12 else float(data.min())
-
-
-def render_disc_model(
-    aperture: Aperture,
-    disc: Mapping[str, float],
-    size: int,
-    data: np.ndarray,
-    field_position: Sequence[float] | None = None,
-    censored: np.ndarray | None = None,
-    ignored: np.ndarray | None = None,
-    covers: dict | None = None,
-) -> tuple[np.ndarray, float, float]:
-    """Model crop (flattened) with its levels for ``data``: (model, background, plateau).
-
-    The levels are solved for (least squares over the pixels neither censored nor ignored);
-    a ``disc`` that holds ``"plateau"`` (a saturated disc) fixes the plateau
-    and only the background is solved for. ``covers``: see :func:`disc_profile`.
-    """
-    profile = disc_profile(aperture, disc, size, field_position, covers).ravel().astype(np.float64)
-    seen = slice(None)
-    if censored is not None or ignored is not None:
-        seen = ~(_or(censored, ignored))
-    if "plateau" in disc:
-        plateau = disc["plateau"]
-        background = _background(profile[seen], data[seen], plateau)
-    else:
-        background, plateau = _levels(profile[seen], data[seen])
-    return background + (plateau - background) * profile, background, plateau
-
-
 def _residuals(model: np.ndarray, crop: DiscCrop) -> np.ndarray:
     """model − data; where the source is clipped only a model below the recorded value is an error;
     where the light is not the disc's, none."""
@@ -259,11 +140,6 @@ def _residuals(model: np.ndarray, crop: DiscCrop) -> np.ndarray:
     if crop.ignored is not None:
         residual[crop.ignored] = 0.0
     return residual
-
-
-def _or(a: np.ndarray | None, b: np.ndarray | None) -> np.ndarray:
-    """``a | b`` of two optional masks (one of them given)."""
-    return b if a is None else a if b is None else a | b
 
 
 def _disc_vector(crop: DiscCrop) -> tuple[list[str], list[float], list[float], list[float]]:
@@ -361,7 +237,7 @@ def fit_discs(
         turned = aperture.near() if any(c.turned for c in crops) else aperture
         parts = [
             _residuals(render_disc_model(turned if c.turned else aperture, d, c.size, c.data, c.field_position,
-                                         c.censored, c.ignored, covers)[0], c) / s
+                                         c.censored, c.ignored, covers).model, c) / s
             for c, d, s in zip(crops, discs, noise)
         ]
         return np.concatenate(parts)
@@ -403,9 +279,9 @@ def fit_discs(
     fits, row = [], 0
     for crop, values, (at, names), count, scale in zip(crops, discs, blocks, rows, noise):
         shown = aperture.near() if crop.turned else aperture
-        model, background, plateau = render_disc_model(shown, values, crop.size, crop.data, crop.field_position,
-                                                       crop.censored, crop.ignored)
-        rss = float(np.sum(_residuals(model, crop) ** 2))
+        rendered = render_disc_model(shown, values, crop.size, crop.data, crop.field_position, crop.censored,
+                                     crop.ignored)
+        rss = float(np.sum(_residuals(rendered.model, crop) ** 2))
         full = crop.to_full(values)
         in_full = {"cx": crop.factor, "cy": crop.factor, "diameter_px": crop.factor, "blur_px": crop.factor}
         uncertainty = {name: float(s * in_full.get(name, 1.0)) for name, s in zip(names, sigma[at : at + len(names)])}
@@ -415,8 +291,8 @@ def fit_discs(
             aperture=shown,
             center_xy=full.center_xy,
             diameter_px=full.diameter_px,
-            plateau=float(plateau),
-            background=float(background),
+            plateau=float(rendered.plateau),
+            background=float(rendered.background),
             blur_px=full.blur_px,
             rss=rss,
             pixels=crop.pixels,
@@ -453,11 +329,3 @@ def fit_disc_pixels(
     :func:`_search_bounds`); the fitted aperture keeps its angle in [0, symmetry).
     """
     return fit_discs([crop_disc(luminance, disc, clipped)], family, start).fits[0]
-
-
-def model_window(fit: PixelFit, left: int, top: int, size: int) -> np.ndarray:
-    """The fitted model of a disc on a full-resolution window (size × size, top-left at (left, top))."""
-    disc = {"cx": fit.center_xy[0] - left, "cy": fit.center_xy[1] - top, "diameter_px": fit.diameter_px,
-            "blur_px": fit.blur_px}
-    profile = disc_profile(fit.aperture, disc, size, fit.field_position)
-    return (fit.background + (fit.plateau - fit.background) * profile).astype(np.float32)

@@ -21,7 +21,7 @@ import numpy as np
 from bokehfit.comparison import Comparison
 from bokehfit.uncertainty import plus_minus
 from bokehfit.words import diameter_text, distance_text, evidence_words, fstop_text, kernel_words, table_candidates
-from bokehfit.fit.pixels import model_window
+from bokehfit.fit.disc_model import model_window
 from bokehfit.metrics import METRICS
 from bokehfit.report.overlay import ROLE_BGR, disc_role, draw_disc_overlay
 

@@ -1,0 +1,170 @@
+"""The pixel model of a disc: its blurred unit-contrast profile, and its crop with the levels that fit the data.
+
+Notes
+-----
+The model of a disc's crop is
+
+    I(x) = b + (p − b) · (G_σ ⊗ K)(x),
+
+with K the light of the aperture on each pixel (``bokehfit.kernels.exact``:
+exact coverage, weighted by the ``rim`` profile where the aperture has one,
+clipped by the ``vignetting`` at the disc's place in the frame) at centre c
+and equal-area diameter d, and G_σ a Gaussian edge blur (sensor,
+demosaicing, JPEG). For a profile, the background b and plateau p that fit
+the data best are solved for (they enter linearly: :func:`render_disc_model`);
+the fit of c, d, σ and the aperture is :mod:`bokehfit.fit.pixels`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING, NamedTuple
+
+import cv2
+import numpy as np
+
+from bokehfit.apertures import Aperture, image_to_aperture
+from bokehfit.kernels.exact import coverage, rim_coverage
+
+if TYPE_CHECKING:
+    from bokehfit.fit.pixels import PixelFit
+
+__all__ = [
+    "BLUR_RANGE",
+    "DiscModel",
+    "disc_profile",
+    "model_window",
+    "render_disc_model",
+]
+
+#: Edge-blur bounds, crop pixels.
+BLUR_RANGE = (0.05, 6.0)
+#: Sub-pixels a side for the rim profile in the fit (the edge blur hides finer detail).
+RIM_FIT_SUPERSAMPLE = 3
+#: Bytes of coverages a fit keeps for its next steps (:func:`disc_profile`'s ``covers``): a
+#: Jacobian's blur column comes a few steps after the point it is taken at.
+COVERS_BYTES = 32 << 20
+
+
+class DiscModel(NamedTuple):
+    """A disc's model crop with its levels (:func:`render_disc_model`)."""
+
+    model: np.ndarray  #: flattened, the crop's size
+    background: float
+    plateau: float
+
+
+def disc_profile(
+    aperture: Aperture,
+    disc: Mapping[str, float],
+    size: int,
+    field_position: Sequence[float] | None = None,
+    covers: dict | None = None,
+) -> np.ndarray:
+    """The blurred unit-contrast disc (size × size) of ``aperture``; ``disc`` holds the
+    :data:`~bokehfit.fit.pixels.DISC_NAMES` in crop units, the centre in crop pixel coordinates.
+    ``field_position`` places a vignetted aperture.
+
+    ``covers``, where given, is the caller's memo of the unblurred coverages by their geometry
+    (aperture, size, centre, diameter, field position): a fit's steps that change only the blur
+    or the levels (a Jacobian's blur column, a plateau's) reuse the coverage instead of
+    integrating it again. It keeps the latest, about ``COVERS_BYTES`` in all."""
+    centre = (size - 1) / 2.0
+    where = None if aperture.vignetting is None else field_position
+    key = (aperture, size, disc["cx"], disc["cy"], disc["diameter_px"], None if where is None else tuple(where))
+    cover = None if covers is None else covers.get(key)
+    if cover is None:
+        scale = max(disc["diameter_px"], 1e-3) * math.sqrt(math.pi) / 2.0
+        (offset_xy,) = image_to_aperture([[disc["cy"] - centre, disc["cx"] - centre]])
+        if aperture.rim != 0.0:
+            cover, _ = rim_coverage(aperture, scale, size, field_position=where, supersample=RIM_FIT_SUPERSAMPLE,
+                                    max_chord_error=1e-4, offset_xy=tuple(offset_xy))
+        else:
+            cover = coverage(_outline(aperture, where, covers), scale, size, offset_xy=tuple(offset_xy))
+        cover = cover.astype(np.float32)
+        if covers is not None:
+            covers[key] = cover
+            while (len(covers) - (_OUTLINES in covers)) * cover.nbytes > COVERS_BYTES and len(covers) > 2:
+                del covers[next(k for k in covers if k != _OUTLINES)]  # the oldest
+    return cv2.GaussianBlur(cover, (0, 0), max(disc["blur_px"], BLUR_RANGE[0]), borderType=cv2.BORDER_REPLICATE)
+
+
+#: Key of :func:`disc_profile`'s ``covers`` under which the outlines of the latest apertures are kept.
+_OUTLINES = "outlines"
+#: Outlines kept there: a fit's steps that move only a disc (its centre, size or blur) reuse the
+#: aperture's outline, which for a vignetted one (the shape clipped by the barrel) costs more
+#: than the coverage.
+OUTLINES_KEPT = 32
+
+
+def _outline(aperture: Aperture, where: tuple[float, float] | None, covers: dict | None):
+    """``aperture.outline(where)``, from the memo in ``covers`` where there is one."""
+    if covers is None:
+        return aperture.outline(where)
+    outlines = covers.setdefault(_OUTLINES, {})
+    key = (aperture, None if where is None else tuple(where))
+    outline = outlines.get(key)
+    if outline is None:
+        outline = outlines[key] = aperture.outline(where)
+        if len(outlines) > OUTLINES_KEPT:
+            del outlines[next(iter(outlines))]  # the oldest
+    return outline
+
+def _levels(profile: np.ndarray, data: np.ndarray) -> tuple[float, float]:
+    """Background and plateau that fit ``data`` best for this profile (2×2 linear least squares)."""
+    ones = 1.0 - profile
+    a11, a12, a22 = float(ones @ ones), float(ones @ profile), float(profile @ profile)
+    r1, r2 = float(ones @ data), float(profile @ data)
+    det = a11 * a22 - a12 * a12
+    if abs(det) < 1e-12:
+        return float(data.mean()), float(data.mean())
+    return (a22 * r1 - a12 * r2) / det, (a11 * r2 - a12 * r1) / det
+
+
+def _background(profile: np.ndarray, data: np.ndarray, plateau: float) -> float:
+    """The background that fits ``data`` best for this profile and a given plateau."""
+    ones = 1.0 - profile
+    weight = float(ones @ ones)
+    return float(ones @ (data - plateau * profile)) / weight if weight > 1e-12 else float(data.min())
+
+
+def render_disc_model(
+    aperture: Aperture,
+    disc: Mapping[str, float],
+    size: int,
+    data: np.ndarray,
+    field_position: Sequence[float] | None = None,
+    censored: np.ndarray | None = None,
+    ignored: np.ndarray | None = None,
+    covers: dict | None = None,
+) -> DiscModel:
+    """Model crop (flattened) with its levels for ``data``: a :class:`DiscModel` (model, background, plateau).
+
+    The levels are solved for (least squares over the pixels neither censored nor ignored);
+    a ``disc`` that holds ``"plateau"`` (a saturated disc) fixes the plateau
+    and only the background is solved for. ``covers``: see :func:`disc_profile`.
+    """
+    profile = disc_profile(aperture, disc, size, field_position, covers).ravel().astype(np.float64)
+    seen = slice(None)
+    if censored is not None or ignored is not None:
+        seen = ~(_or(censored, ignored))
+    if "plateau" in disc:
+        plateau = disc["plateau"]
+        background = _background(profile[seen], data[seen], plateau)
+    else:
+        background, plateau = _levels(profile[seen], data[seen])
+    return DiscModel(model=background + (plateau - background) * profile, background=background, plateau=plateau)
+
+
+def _or(a: np.ndarray | None, b: np.ndarray | None) -> np.ndarray:
+    """``a | b`` of two optional masks (one of them given)."""
+    return b if a is None else a if b is None else a | b
+
+
+def model_window(fit: PixelFit, left: int, top: int, size: int) -> np.ndarray:
+    """The fitted model of a disc on a full-resolution window (size × size, top-left at (left, top))."""
+    disc = {"cx": fit.center_xy[0] - left, "cy": fit.center_xy[1] - top, "diameter_px": fit.diameter_px,
+            "blur_px": fit.blur_px}
+    profile = disc_profile(fit.aperture, disc, size, fit.field_position)
+    return (fit.background + (fit.plateau - fit.background) * profile).astype(np.float32)
