@@ -221,7 +221,8 @@ def test_pixel_fit_varies_the_apertures_named_parameters():
     """A slit's fit varies and reports angle_deg and aspect by name, from Aperture.parameters."""
     from bokehfit.discs import find_discs
     from bokehfit.fit.families import FAMILIES
-    from bokehfit.fit.pixels import DISC_NAMES, fit_disc_pixels
+    from bokehfit.fit.pixels import fit_disc_pixels
+    from bokehfit.fit.vector import DISC_NAMES
     from bokehfit.synthetic import SyntheticDisc, render_discs
 
     truth = SyntheticDisc((40.3, 39.6), 30.0, make_aperture("slit", 25.0, aspect=0.4))

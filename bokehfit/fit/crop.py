@@ -88,7 +88,7 @@ class DiscCrop:
 
     @property
     def start(self) -> dict[str, float]:
-        """The disc's :data:`~bokehfit.fit.pixels.DISC_NAMES` in crop units from its outline, a one-pixel blur."""
+        """The disc's :data:`~bokehfit.fit.vector.DISC_NAMES` in crop units from its outline, a one-pixel blur."""
         left, top = self.corner
         return {
             "cx": (self.disc.center_xy[0] - left + 0.5) / self.factor - 0.5,

@@ -63,7 +63,7 @@ def disc_profile(
     covers: dict | None = None,
 ) -> np.ndarray:
     """The blurred unit-contrast disc (size × size) of ``aperture``; ``disc`` holds the
-    :data:`~bokehfit.fit.pixels.DISC_NAMES` in crop units, the centre in crop pixel coordinates.
+    :data:`~bokehfit.fit.vector.DISC_NAMES` in crop units, the centre in crop pixel coordinates.
     ``field_position`` places a vignetted aperture.
 
     ``covers``, where given, is the caller's memo of the unblurred coverages by their geometry

@@ -19,7 +19,8 @@ from bokehfit.discs import Disc
 from bokehfit.fit.agreement import MIN_ELONGATED_DISCS
 from bokehfit.fit.crop import DiscCrop
 from bokehfit.fit.disc_model import render_disc_model
-from bokehfit.fit.pixels import FIT_BOUNDS, PixelFit
+from bokehfit.fit.pixels import PixelFit
+from bokehfit.fit.vector import FIT_BOUNDS
 from bokehfit.fit.signature import Screen
 
 __all__ = ["add_feature", "at_bound", "features_to_test", "FEATURE_DELTA_BIC", "MIN_RIM", "VIGNETTING_MIN_FIELD"]

@@ -32,17 +32,18 @@ cov = (JᵀJ)⁻¹ · RSS / (n − k).
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import least_squares
+from scipy.optimize import OptimizeResult, least_squares
 
-from bokehfit.apertures import Aperture, ParameterSpec
+from bokehfit.apertures import Aperture
 from bokehfit.discs import Disc
 from bokehfit.fit.crop import DiscCrop, crop_disc
-from bokehfit.fit.disc_model import BLUR_RANGE, render_disc_model
+from bokehfit.fit.disc_model import render_disc_model
 from bokehfit.fit.families import Family
+from bokehfit.fit.vector import Block, FitVector, fit_vector
 
 __all__ = [
     "JointFit",
@@ -56,17 +57,6 @@ MAX_EVALUATIONS = 200
 #: Relative change of the cost and of the parameters at which a fit stops (scipy's ftol and xtol):
 #: 1e-6 of an angle of 30° is 3e-5°, far below what the discs can tell.
 TOLERANCE = 1e-6
-#: Widest slit fitted: at aspect 1 the slit is the square, which has a model of its own.
-MAX_SLIT_ASPECT = 0.8
-#: The parameters of every disc, first in the fit's vector (crop units; the centre in crop pixel coordinates).
-DISC_NAMES = ("cx", "cy", "diameter_px", "blur_px")
-#: Fit bounds narrower than :attr:`ParameterSpec.bounds`, by parameter name.
-FIT_BOUNDS = {"aspect": (0.01, MAX_SLIT_ASPECT), "vignetting_radius": (1.0, 4.0), "vignetting_shift": (-4.0, 4.0),
-              "squeeze": (0.25, 4.0)}
-#: Parameters searched within a factor of 2 of their start (scale factors, not offsets).
-RELATIVE_PARAMETERS = ("aspect", "squeeze")
-#: A saturated disc's plateau is searched up to this many times the clip level.
-MAX_PLATEAU_OVER_CLIP = 50.0
 
 
 @dataclass(frozen=True)
@@ -115,22 +105,6 @@ class PixelFit:
         return n * math.log(max(self.rss, 1e-300) / n) + self.parameter_count * math.log(n)
 
 
-def _search_bounds(parameter: ParameterSpec, start: float) -> tuple[float, float, float]:
-    """(start, lower, upper) of one aperture parameter for the fit.
-
-    A periodic parameter (the angle) is searched half a period either side of
-    its start; the others within their bounds (:data:`FIT_BOUNDS` where the fit
-    asks for less), scale factors only within a factor of 2 of the start.
-    """
-    if parameter.periodic is not None:
-        return start, start - 0.5 * parameter.periodic, start + 0.5 * parameter.periodic
-    low, high = FIT_BOUNDS.get(parameter.name, parameter.bounds)
-    start = min(max(start, low), high)
-    if parameter.name in RELATIVE_PARAMETERS:
-        low, high = max(low, 0.5 * start), min(high, 2.0 * start)
-    return start, low, high
-
-
 def _residuals(model: np.ndarray, crop: DiscCrop) -> np.ndarray:
     """model − data; where the source is clipped only a model below the recorded value is an error;
     where the light is not the disc's, none."""
@@ -140,41 +114,6 @@ def _residuals(model: np.ndarray, crop: DiscCrop) -> np.ndarray:
     if crop.ignored is not None:
         residual[crop.ignored] = 0.0
     return residual
-
-
-def _disc_vector(crop: DiscCrop) -> tuple[list[str], list[float], list[float], list[float]]:
-    """One disc's names, start, lower and upper bounds (crop units)."""
-    start = crop.start
-    names = list(DISC_NAMES)
-    x0 = [start[n] for n in DISC_NAMES]
-    lower = [start["cx"] - 3, start["cy"] - 3, 0.5 * start["diameter_px"], BLUR_RANGE[0]]
-    upper = [start["cx"] + 3, start["cy"] + 3, 1.5 * start["diameter_px"], BLUR_RANGE[1]]
-    clip = crop.clip_level
-    if clip is not None:  # a saturated disc: its plateau is somewhere above the clip
-        names.append("plateau")
-        x0.append(max(crop.disc.plateau, clip) * 1.5)
-        lower.append(clip)
-        upper.append(clip * MAX_PLATEAU_OVER_CLIP)
-    return names, x0, lower, upper
-
-
-def _shared_vector(start: Aperture, free: Sequence[str]) -> tuple[list[float], list[float], list[float]]:
-    parameters = start.parameters
-    values = start.values
-    x0, lower, upper = [], [], []
-    for name in free:
-        first, low, high = _search_bounds(parameters[name], values[name])
-        x0.append(first)
-        lower.append(low)
-        upper.append(high)
-    return x0, lower, upper
-
-
-def _wrapped(aperture: Aperture, values: Mapping[str, float]) -> Aperture:
-    """``aperture`` with ``values`` set, periodic ones (the angle) reduced to [0, period)."""
-    parameters = aperture.parameters
-    wrapped = {n: (v % parameters[n].periodic if parameters[n].periodic is not None else v) for n, v in values.items()}
-    return aperture.replace(**wrapped) if wrapped else aperture
 
 
 @dataclass(frozen=True)
@@ -207,33 +146,38 @@ def fit_discs(
 
     The vector fitted is the shared aperture parameters ``free`` (default: all
     of ``start``'s :attr:`~bokehfit.apertures.Aperture.parameters`), then each
-    disc's :data:`DISC_NAMES` (and plateau where it is saturated). ``noise``
+    disc's :data:`~bokehfit.fit.vector.DISC_NAMES` (and plateau where it is saturated). ``noise``
     (one per crop, default 1) divides each disc's residuals. ``disc_starts``
     (crop units) replace the outline's starting values where given.
     """
     free = tuple(start.parameters) if free is None else tuple(free)
     noise = np.ones(len(crops)) if noise is None else np.maximum(np.asarray(noise, dtype=np.float64), 1e-12)
-    x0, lower, upper = _shared_vector(start, free)
-    blocks = []
-    for i, crop in enumerate(crops):
-        names, d0, dlow, dhigh = _disc_vector(crop)
-        if disc_starts is not None and disc_starts[i] is not None:
-            d0 = [min(max(disc_starts[i].get(n, v), lo), hi) for n, v, lo, hi in zip(names, d0, dlow, dhigh)]
-        blocks.append((len(x0), names))
-        x0 += d0
-        lower += dlow
-        upper += dhigh
-    shared = len(free)
+    vector = fit_vector(crops, start, free, disc_starts)
+    result = _solve(_weighted_residuals(crops, vector, noise), vector, _sparsity(crops, vector))
+    aperture = vector.wrapped_at(result.x)
+    evidence = _evidence(result, crops, vector)
+    fits = [
+        _disc_fit(crop, values, block, aperture, family, result, evidence.sigma, vector)
+        for crop, values, block in zip(crops, vector.discs_at(result.x), vector.discs)
+    ]
+    return JointFit(
+        aperture=aperture,
+        fits=fits,
+        uncertainty=_shared_uncertainty(evidence.sigma, vector),
+        rss=evidence.rss,
+        pixels=evidence.pixels,
+        parameters=evidence.parameters,
+        evaluations=int(result.nfev),
+    )
 
-    def split(vector):
-        aperture = start.replace(**dict(zip(free, (float(v) for v in vector[:shared])))) if shared else start
-        discs = [dict(zip(names, (float(v) for v in vector[at : at + len(names)]))) for at, names in blocks]
-        return aperture, discs
 
+def _weighted_residuals(crops: Sequence[DiscCrop], vector: FitVector,
+                        noise: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+    """What the fit minimises: every disc's residuals over its noise level, one disc after the other."""
     covers: dict = {}  # the coverages of the last steps (disc_profile)
 
-    def residuals(vector):
-        aperture, discs = split(vector)
+    def residuals(x: np.ndarray) -> np.ndarray:
+        aperture, discs = vector.aperture_at(x), vector.discs_at(x)
         turned = aperture.near() if any(c.turned for c in crops) else aperture
         parts = [
             _residuals(render_disc_model(turned if c.turned else aperture, d, c.size, c.data, c.field_position,
@@ -242,19 +186,30 @@ def fit_discs(
         ]
         return np.concatenate(parts)
 
+    return residuals
+
+
+def _sparsity(crops: Sequence[DiscCrop], vector: FitVector) -> np.ndarray | None:
+    """Which residuals depend on which parameters: a disc's on the shared ones and its own (None for one disc)."""
+    if len(crops) <= 1:
+        return None
     rows = [c.data.size for c in crops]
-    sparsity = None
-    if len(crops) > 1:
-        sparsity = np.zeros((sum(rows), len(x0)), dtype=bool)
-        row = 0
-        for (at, names), count in zip(blocks, rows):
-            sparsity[row : row + count, :shared] = True
-            sparsity[row : row + count, at : at + len(names)] = True
-            row += count
-    result = least_squares(
+    sparsity = np.zeros((sum(rows), vector.size), dtype=bool)
+    row, shared = 0, len(vector.free)
+    for block, count in zip(vector.discs, rows):
+        sparsity[row : row + count, :shared] = True
+        sparsity[row : row + count, block.at : block.at + len(block.names)] = True
+        row += count
+    return sparsity
+
+
+def _solve(residuals: Callable[[np.ndarray], np.ndarray], vector: FitVector,
+           sparsity: np.ndarray | None) -> OptimizeResult:
+    """Bounded least squares (trust-region reflective) from the vector's start."""
+    return least_squares(
         residuals,
-        np.array(x0, dtype=np.float64),
-        bounds=(lower, upper),
+        np.array(vector.start, dtype=np.float64),
+        bounds=(vector.lower, vector.upper),
         method="trf",
         x_scale="jac",
         max_nfev=MAX_EVALUATIONS,
@@ -264,53 +219,64 @@ def fit_discs(
         jac_sparsity=sparsity,
         tr_solver="exact" if sparsity is None else "lsmr",
     )
-    _, discs = split(result.x)
-    aperture = _wrapped(start, {name: float(v) for name, v in zip(free, result.x[:shared])})
+
+
+@dataclass(frozen=True)
+class _Evidence:
+    """What a solved fit says of itself: its weighted RSS over its pixels and parameters, and its spread."""
+
+    rss: float
+    pixels: int
+    parameters: int  #: the vector's and the levels solved for beside it
+    sigma: np.ndarray  #: one standard deviation of each of the vector's parameters (NaN where unknown)
+
+
+def _evidence(result: OptimizeResult, crops: Sequence[DiscCrop], vector: FitVector) -> _Evidence:
+    """The fit's evidence, its uncertainties from the Jacobian at the optimum: cov = (JᵀJ)⁻¹ · RSS / (n − k)."""
     jacobian = result.jac.toarray() if hasattr(result.jac, "toarray") else result.jac
     # The levels solved for at every step count too: two per disc, one where the plateau is fitted.
-    n, k = sum(c.pixels for c in crops), len(x0) + sum(1 if "plateau" in names else 2 for _, names in blocks)
+    n, k = sum(c.pixels for c in crops), vector.size + vector.levels
     total = float(np.sum(result.fun**2))
-    sigma = np.full(len(x0), np.nan)
+    sigma = np.full(vector.size, np.nan)
     try:
         covariance = np.linalg.pinv(jacobian.T @ jacobian) * total / max(n - k, 1)
         sigma = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
     except np.linalg.LinAlgError:
         pass
-    fits, row = [], 0
-    for crop, values, (at, names), count, scale in zip(crops, discs, blocks, rows, noise):
-        shown = aperture.near() if crop.turned else aperture
-        rendered = render_disc_model(shown, values, crop.size, crop.data, crop.field_position, crop.censored,
-                                     crop.ignored)
-        rss = float(np.sum(_residuals(rendered.model, crop) ** 2))
-        full = crop.to_full(values)
-        in_full = {"cx": crop.factor, "cy": crop.factor, "diameter_px": crop.factor, "blur_px": crop.factor}
-        uncertainty = {name: float(s * in_full.get(name, 1.0)) for name, s in zip(names, sigma[at : at + len(names)])}
-        uncertainty.update({name: float(s) for name, s in zip(free, sigma[:shared])})
-        fits.append(PixelFit(
-            family=family,
-            aperture=shown,
-            center_xy=full.center_xy,
-            diameter_px=full.diameter_px,
-            plateau=float(rendered.plateau),
-            background=float(rendered.background),
-            blur_px=full.blur_px,
-            rss=rss,
-            pixels=crop.pixels,
-            uncertainty=uncertainty,
-            evaluations=int(result.nfev),
-            success=bool(result.success),
-            censored=0 if crop.censored is None else int(crop.censored.sum()),
-            field_position=crop.field_position,
-        ))
-        row += count
-    return JointFit(
-        aperture=aperture,
-        fits=fits,
-        uncertainty={name: float(s) for name, s in zip(free, sigma[:shared])},
-        rss=total,
-        pixels=n,
-        parameters=k,
+    return _Evidence(rss=total, pixels=n, parameters=k, sigma=sigma)
+
+
+def _shared_uncertainty(sigma: np.ndarray, vector: FitVector) -> dict[str, float]:
+    """One standard deviation of each shared aperture parameter, by name."""
+    return {name: float(s) for name, s in zip(vector.free, sigma[: len(vector.free)])}
+
+
+def _disc_fit(crop: DiscCrop, values: Mapping[str, float], block: Block, aperture: Aperture, family: Family,
+              result: OptimizeResult, sigma: np.ndarray, vector: FitVector) -> PixelFit:
+    """One disc's fit at the optimum, in full-resolution units: ``values`` its part of the vector."""
+    shown = aperture.near() if crop.turned else aperture
+    rendered = render_disc_model(shown, values, crop.size, crop.data, crop.field_position, crop.censored,
+                                 crop.ignored)
+    full = crop.to_full(values)
+    in_full = {"cx": crop.factor, "cy": crop.factor, "diameter_px": crop.factor, "blur_px": crop.factor}
+    own = sigma[block.at : block.at + len(block.names)]
+    uncertainty = {name: float(s * in_full.get(name, 1.0)) for name, s in zip(block.names, own)}
+    uncertainty.update(_shared_uncertainty(sigma, vector))
+    return PixelFit(
+        family=family,
+        aperture=shown,
+        center_xy=full.center_xy,
+        diameter_px=full.diameter_px,
+        plateau=float(rendered.plateau),
+        background=float(rendered.background),
+        blur_px=full.blur_px,
+        rss=float(np.sum(_residuals(rendered.model, crop) ** 2)),
+        pixels=crop.pixels,
+        uncertainty=uncertainty,
         evaluations=int(result.nfev),
+        success=bool(result.success),
+        censored=0 if crop.censored is None else int(crop.censored.sum()),
+        field_position=crop.field_position,
     )
 
 
@@ -323,9 +289,9 @@ def fit_disc_pixels(
 ) -> PixelFit:
     """Least-squares fit of ``family`` to one disc's pixels, starting at the aperture ``start`` (the screen's).
 
-    The vector fitted is the disc's :data:`DISC_NAMES` (and its plateau where
+    The vector fitted is the disc's :data:`~bokehfit.fit.vector.DISC_NAMES` (and its plateau where
     ``clipped`` marks some of its pixels), then ``start``'s
     :attr:`~bokehfit.apertures.Aperture.parameters` by name (bounds from
-    :func:`_search_bounds`); the fitted aperture keeps its angle in [0, symmetry).
+    :func:`bokehfit.fit.vector._search_bounds`); the fitted aperture keeps its angle in [0, symmetry).
     """
     return fit_discs([crop_disc(luminance, disc, clipped)], family, start).fits[0]
