@@ -6,7 +6,7 @@ The steps (design.md §8, the simplest model the data supports):
    (≥ 8 px), not cut by the frame, and most of their outline their own.
    Saturated discs are fitted with their clipped pixels as lower bounds; discs
    that overlap others with the others' light left out, discs crossed by an
-   occluder with its pixels left out (:mod:`bokehfit.fit.pixels`). At most ``FitOptions.max_discs``: discs on
+   occluder with its pixels left out (:mod:`bokehfit.fit.crop`). At most ``FitOptions.max_discs``: discs on
    their own first, then clean before saturated before partial, the largest and
    clearest first.
 2. **Screen.** Each disc's outline is compared with every family's radial

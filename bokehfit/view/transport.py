@@ -85,7 +85,7 @@ class Limits:
 
 
 class Exchange(Protocol):
-    """One request and its answer, as the transport drives it (:class:`bokehfit.view.server` implements it).
+    """One request and its answer, as the transport drives it (:class:`bokehfit.view.handler.Handler` implements it).
 
     ``begin`` runs on the event loop and must be quick; ``respond`` runs on a
     worker thread. Neither raises: every failure becomes an answer.

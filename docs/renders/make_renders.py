@@ -32,7 +32,8 @@ from pathlib import Path
 
 import numpy as np
 
-from bokehfit.scene import PointLight, PointScene, render, write_render
+from bokehfit.apertures import make_aperture
+from bokehfit.scene import PointLight, PointScene, make_lens, make_settings, render, write_render
 
 #: Width and height of every render (pixels).
 SIZE = (384, 256)
@@ -95,7 +96,11 @@ def main(argv: list[str] | None = None) -> None:
     args.out.mkdir(parents=True, exist_ok=True)
     width, height = SIZE
     for name, (scene, aperture) in renders().items():
-        result = render(scene, spp=args.spp, width=width, height=height, **{**LENS, **aperture})
+        params = {**LENS, **aperture}
+        fstop, focus = params.pop("fstop"), params.pop("focus_distance_m")
+        angle = params.pop("angle_deg", 0.0)
+        lens = make_lens(make_aperture(params.pop("shape"), angle, **params), fstop=fstop, focus_distance_m=focus)
+        result = render(scene, lens, make_settings(width, height, args.spp))
         write_render(args.out / name, result.image)
         print(f"{name}: {result.lens.describe()}, {result.time_s:.2f} s on {result.adapter}")
 
