@@ -228,3 +228,19 @@ def test_sampling_methods_converge_to_exact_per_feature(gpu, method, min_rate, f
     rate = math.log(errors[0] / errors[1]) / math.log(counts[1] / counts[0])
     assert rate >= min_rate, f"{method} {feature}: L1 {errors}, rate {rate:.2f}"
     assert errors[1] < 0.01
+
+
+@pytest.mark.parametrize("shape, angle, extra", [
+    ("circle", 0.0, {}), ("hexagon", 17.0, {}), ("ngon", 33.0, {"blades": 9, "roundness": 0.6}),
+    ("square", 10.0, {"squeeze": 1.6}), ("star", 5.0, {}), ("slit", 20.0, {"aspect": 0.4}),
+    ("pentagon", 3.0, {"roundness": 0.3, "squeeze": 0.7}), ("triangle", 40.0, {}),
+])
+def test_the_models_radial_fraction_is_the_outline_polygons(shape, angle, extra):
+    """The rim's ρ (design.md §3b) from the aperture model, which ``rim_coverage`` uses, and from the
+    fan of its outline's polygon (arcs within 1e-9), at points inside, on and outside the outline."""
+    from bokehfit.kernels.exact import radial_fraction
+
+    aperture = make_aperture(shape, angle, rim=0.5, **extra)
+    points = np.random.default_rng(7).uniform(-1.2, 1.2, (4000, 2))
+    by_polygon, _ = radial_fraction(points, aperture.outline().polyline(1e-9))
+    assert np.allclose(aperture.radial_fraction(points), by_polygon, rtol=0, atol=1e-6)

@@ -596,12 +596,18 @@ class Aperture:
             p = samplers.apply_squeeze(p, 1.0 / self.squeeze)
         return p @ self.rotation(), 1.0 / (scale * scale)
 
+    def radial_fraction(self, p: np.ndarray, channel: str | None = None) -> np.ndarray:
+        """ρ of design.md §3b at points ``p`` (unit-area units, the aperture's frame): |p| over the
+        distance to the unclipped outline in p's direction (0 at the centre, 1 on the outline, past 1
+        outside), exact for every shape the centre sees whole; the rim profile is a function of it."""
+        return self._radial_fraction_at_zero(self._to_zero(p, channel)[0])
+
     def pdf(self, p: np.ndarray, channel: str | None = None) -> np.ndarray:
         """Density of the points of :meth:`sample` (the weights carry the vignetting): the rim profile inside, 0 outside."""
         p0, jacobian = self._to_zero(p, channel)
         if self.mask is not None:
             return mask_pdf(p0, self.mask) * jacobian
-        fraction = self._radial_fraction_at_zero(p0)
+        fraction = self._radial_fraction_at_zero(p0)  # radial_fraction(p), with p0 reused for the mask
         return np.where(fraction <= 1.0 + 1e-12, samplers.rim_weight(fraction, self.rim) * jacobian, 0.0)
 
     def invert(self, p: np.ndarray, channel: str | None = None) -> np.ndarray:

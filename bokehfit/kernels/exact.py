@@ -387,8 +387,16 @@ def radial_fraction(points: np.ndarray, polygon: np.ndarray) -> tuple[np.ndarray
     theta = np.where(theta < angles[0], theta + 2.0 * np.pi, theta)
     k = np.clip(np.searchsorted(angles, theta, side="right") - 1, 0, len(polygon) - 1)
     rho = np.sum(points * normal[k], axis=-1) / support[k]
-    gradient = float(np.max(np.hypot(normal[:, 0], normal[:, 1]) / support))
-    return rho, gradient
+    return rho, fan_gradient(polygon)
+
+
+def fan_gradient(polygon: np.ndarray) -> float:
+    """max |∇ρ| over a polygon star-shaped about the origin: one over the least distance from the
+    origin to an edge's line (:func:`radial_fraction`)."""
+    polygon = np.asarray(polygon, dtype=np.float64)
+    a, b = polygon, np.roll(polygon, -1, axis=0)
+    normal = np.stack([b[:, 1] - a[:, 1], a[:, 0] - b[:, 0]], axis=-1)
+    return float(np.max(np.hypot(normal[:, 0], normal[:, 1]) / np.abs(np.sum(a * normal, axis=-1))))
 
 
 def rim_coverage(
@@ -437,7 +445,11 @@ def rim_coverage(
     rows, cols = np.nonzero(fine)
     offsets_rc = np.stack([coordinates[rows], coordinates[cols]], axis=-1)
     polygon = aperture.outline().polyline(max_chord_error)
-    rho, gradient = radial_fraction(image_to_aperture(offsets_rc) - np.array([dx, dy]) / scale, polygon)
+    points = image_to_aperture(offsets_rc) - np.array([dx, dy]) / scale
+    if aperture.mask is None:  # the model's own ρ: exact, and no search of the polygon's fan per point
+        rho, gradient = aperture.radial_fraction(points), fan_gradient(polygon)
+    else:
+        rho, gradient = radial_fraction(points, polygon)
     weighted = np.zeros_like(fine)
     weighted[rows, cols] = fine[rows, cols] * (1.0 + aperture.rim * (2.0 * rho * rho - 1.0))
     image = weighted.reshape(size, supersample, size, supersample).sum(axis=(1, 3)) / supersample**2
