@@ -10,9 +10,12 @@ symmetry, the near disc (:meth:`~Aperture.near`), the fit parameters
 its pdf and inverse (:meth:`~Aperture.sample`, :meth:`~Aperture.pdf`,
 :meth:`~Aperture.invert`; the WGSL twin is ``sample_aperture_params``). At
 scale 1 every unclipped aperture has area exactly 1. Adding a shape is one
-:class:`ShapeSpec` entry in ``SHAPES``. The custom ``mask`` shape of §3b is
-tabulated (:class:`~bokehfit.apertures.mask.MaskTable`): its density is the
-transmission, its outline the 50 % transmission contour.
+:class:`ShapeSpec` entry in ``SHAPES``; what each sampler family does at angle
+0 (sampler, pdf and inverse, outline, corners) is its class in
+:mod:`bokehfit.apertures.behaviours`, and the Aperture applies the rotation,
+squeeze, vignetting and colour to every family alike. The custom ``mask``
+shape of §3b is tabulated (:class:`~bokehfit.apertures.mask.MaskTable`): its
+density is the transmission, its outline the 50 % transmission contour.
 
 :func:`image_to_aperture` is the one conversion from image offsets to the
 aperture frame (design.md §2).
@@ -29,8 +32,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from bokehfit.apertures import samplers
-from bokehfit.apertures.mask import MaskTable, invert_mask_sample, load_mask, mask_pdf, sample_mask
-from bokehfit.apertures.outline import Arc, Outline, Segment, clip_by_circle
+from bokehfit.apertures.behaviours import MASK_OUTLINE_LEVEL  # noqa: F401  (the docs cite it here)
+from bokehfit.apertures.behaviours import BEHAVIOURS, ShapeBehaviour, behaviour_of
+from bokehfit.apertures.mask import MaskTable, load_mask
+from bokehfit.apertures.outline import Outline, Segment, clip_by_circle
 from bokehfit.errors import InputError, check_finite
 from bokehfit.validate import RANGES, check
 
@@ -84,13 +89,13 @@ class ShapeSpec:
     @property
     def rounds(self) -> bool:
         """Whether ``roundness`` applies: the blade edges of n-gons (design.md §3b)."""
-        return self.family in ("ngon", "square")
+        return BEHAVIOURS[self.family].rounds
 
     def symmetry_deg(self, blades: int | None) -> float | None:
         """Smallest rotation mapping the shape onto itself; None for the circle."""
         if self.symmetry is not None:
             return self.symmetry
-        return None if self.family == "circle" else 360.0 / blades
+        return 360.0 / blades if BEHAVIOURS[self.family].has_angle else None
 
 
 SHAPES: dict[str, ShapeSpec] = {
@@ -208,6 +213,11 @@ class Aperture:
     @property
     def spec(self) -> ShapeSpec:
         return SHAPES[self.shape]
+
+    @property
+    def _behaviour(self) -> ShapeBehaviour:
+        """What the shape does at angle 0 (:mod:`bokehfit.apertures.behaviours`), for its family and parameters."""
+        return behaviour_of(self.spec.family, blades=self.blades, aspect=self.aspect, roundness=self.roundness, mask=self.mask)
 
     @property
     def symmetry_deg(self) -> float | None:
@@ -410,49 +420,6 @@ class Aperture:
         root = math.sqrt(self.squeeze)
         return np.array([[1.0 / root, 0.0], [0.0, root]])
 
-    def _rounded_fan(self) -> tuple[int, float] | None:
-        """(n, turn) where the shape is sampled as a rounded n-gon turned by ``turn`` radians, else None.
-
-        Every ngon is; the square is the ngon 4 turned by 45° (design.md §3)
-        once it has rounded blades (at roundness 0 it keeps its own sampler).
-        """
-        family = self.spec.family
-        if family == "ngon":
-            return self.blades, 0.0
-        if family == "square" and self.roundness != 0.0:
-            return 4, math.pi / 4.0
-        return None
-
-    def _outline_at_zero(self) -> Outline:
-        family = self.spec.family
-        if self.mask is not None:
-            return _mask_outline(self.mask)
-        if family == "circle":
-            return Outline(((Arc((0.0, 0.0), (samplers.CIRCLE_RADIUS,) * 2, 0.0, 2.0 * math.pi),),))
-        fan = self._rounded_fan()
-        if fan is not None and self.roundness >= samplers.ROUNDNESS_POLYGON:
-            n, turn = fan
-            geometry = samplers.RoundedNgon(n, self.roundness)
-            c, rho, alpha = geometry.centre_offset, geometry.arc_radius, geometry.half_angle
-            arcs = []
-            for k in range(n):
-                phi = float(geometry.mid_angle(k)) + turn
-                arcs.append(Arc((c * math.cos(phi), c * math.sin(phi)), (rho, rho), phi - alpha, phi + alpha))
-            return Outline((tuple(arcs),))
-        corners = self._base_vertices()
-        return Outline((tuple(Segment(tuple(a), tuple(b)) for a, b in zip(corners, np.roll(corners, -1, axis=0))),))
-
-    def _base_vertices(self) -> np.ndarray:
-        family = self.spec.family
-        if family == "square":
-            return np.array([[0.5, -0.5], [0.5, 0.5], [-0.5, 0.5], [-0.5, -0.5]])
-        if family == "slit":
-            w, h = 0.5 * self.aspect, 0.5 / self.aspect
-            return np.array([[w, -h], [w, h], [-w, h], [-w, -h]])
-        radii = _fan_radii(self)
-        angles = 2.0 * np.pi * np.arange(len(radii)) / len(radii)
-        return np.stack([radii * np.cos(angles), radii * np.sin(angles)], axis=-1)
-
     def outline(self, field_position=None) -> Outline:
         """The exact outline at unit area (rotated, squeezed), clipped by the vignetting at ``field_position``.
 
@@ -461,7 +428,7 @@ class Aperture:
         (None: the unclipped outline). The clipped outline keeps the scale of
         the unclipped one: its area is the light that passes.
         """
-        outline = self._outline_at_zero().transformed(self.rotation())
+        outline = self._behaviour.outline_at_zero().transformed(self.rotation())
         if self.squeeze != 1.0:
             outline = outline.transformed(self.squeeze_matrix())
         if self.vignetting is None or field_position is None:
@@ -500,10 +467,9 @@ class Aperture:
             corners = corners @ (self.squeeze_matrix() @ self.rotation()).T
             return float(np.max(np.hypot(corners[:, 0], corners[:, 1])))
         if self.squeeze == 1.0:
-            if self.spec.family == "circle":
-                return samplers.CIRCLE_RADIUS
-            if self._rounded_fan() is not None and self.roundness >= samplers.ROUNDNESS_POLYGON:
-                return samplers.RoundedNgon(self._rounded_fan()[0], self.roundness).circumradius  # arcs lie inside the circumcircle
+            known = self._behaviour.extent_at_zero()  # the circle's radius, rounded blades' circumradius
+            if known is not None:
+                return known
         verts = self.vertices()
         return float(np.max(np.hypot(verts[:, 0], verts[:, 1])))
 
@@ -511,22 +477,7 @@ class Aperture:
 
     def _radial_fraction_at_zero(self, p: np.ndarray) -> np.ndarray:
         """|p| over the outline's distance in p's direction, for p of the shape at angle 0."""
-        family = self.spec.family
-        fan = self._rounded_fan()
-        if fan is not None:
-            return samplers._rounded_ngon_polar(_turn(p, -fan[1]), fan[0], self.roundness)[2]
-        if family == "circle":
-            return np.hypot(p[..., 0], p[..., 1]) / samplers.CIRCLE_RADIUS
-        if family in ("square", "slit"):
-            w, h = (0.5, 0.5) if family == "square" else (0.5 * self.aspect, 0.5 / self.aspect)
-            return np.maximum(np.abs(p[..., 0]) / w, np.abs(p[..., 1]) / h)
-        corners = self._base_vertices()  # star: the fan triangle's outer edge
-        n = len(corners)
-        theta = np.mod(np.arctan2(p[..., 1], p[..., 0]), 2.0 * np.pi)
-        k = np.minimum(np.floor(theta * n / (2.0 * np.pi)), n - 1).astype(np.int64)
-        a, b = corners[k], corners[(k + 1) % n]
-        normal = np.stack([b[..., 1] - a[..., 1], a[..., 0] - b[..., 0]], axis=-1)
-        return np.sum(p * normal, axis=-1) / np.sum(a * normal, axis=-1)
+        return self._behaviour.radial_fraction_at_zero(p)
 
     def outline_radius(self, theta: np.ndarray) -> np.ndarray:
         """Distance from the centre to the outline at angle 0 (unit area) in the directions ``theta`` (radians).
@@ -541,25 +492,7 @@ class Aperture:
         return 1.0 / self._radial_fraction_at_zero(directions)
 
     def _sample_at_zero(self, u: np.ndarray) -> np.ndarray:
-        family = self.spec.family
-        if self.mask is not None:
-            return sample_mask(u, self.mask)
-        fan = self._rounded_fan()
-        if fan is not None or family == "star":  # fans: the radial fraction is √u₁, so the rim remaps u₁
-            if self.rim != 0.0:
-                u = np.asarray(u, dtype=np.float64)
-                u = np.stack([u[..., 0], samplers.rim_radius(u[..., 1], self.rim) ** 2], axis=-1)
-            if family == "star":
-                return samplers.sample_star(u)
-            p = samplers.sample_rounded_ngon(u, fan[0], self.roundness)
-            return p if fan[1] == 0.0 else _turn(p, fan[1])
-        p = samplers.sample_slit(u, self.aspect) if family == "slit" else getattr(samplers, f"sample_{family}")(u)
-        if self.rim == 0.0:
-            return p
-        fraction = self._radial_fraction_at_zero(p)  # its square is uniform over a star-shaped area
-        safe = np.where(fraction > 0.0, fraction, 1.0)
-        scale = np.where(fraction > 0.0, samplers.rim_radius(fraction * fraction, self.rim) / safe, 0.0)
-        return p * scale[..., None]
+        return self._behaviour.sample_at_zero(u, self.rim)
 
     def sample(self, u: np.ndarray, field_position=None, channel: str | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Points of the aperture and their weights, from ``u`` in [0, 1)² (shape (..., 2)).
@@ -605,37 +538,11 @@ class Aperture:
     def pdf(self, p: np.ndarray, channel: str | None = None) -> np.ndarray:
         """Density of the points of :meth:`sample` (the weights carry the vignetting): the rim profile inside, 0 outside."""
         p0, jacobian = self._to_zero(p, channel)
-        if self.mask is not None:
-            return mask_pdf(p0, self.mask) * jacobian
-        fraction = self._radial_fraction_at_zero(p0)  # radial_fraction(p), with p0 reused for the mask
-        return np.where(fraction <= 1.0 + 1e-12, samplers.rim_weight(fraction, self.rim) * jacobian, 0.0)
+        return self._behaviour.pdf_at_zero(p0, self.rim) * jacobian
 
     def invert(self, p: np.ndarray, channel: str | None = None) -> np.ndarray:
         """The ``u`` that :meth:`sample` maps to ``p``, for every shape (the sampler's inverse, p inside)."""
-        family = self.spec.family
-        if self.mask is not None:
-            return invert_mask_sample(self._to_zero(p, channel)[0], self.mask)
-        p0, _ = self._to_zero(p, channel)
-        fan = self._rounded_fan()
-        if fan is not None or family == "star":
-            if family == "star":
-                u = samplers.invert_star_sample(p0)
-            else:
-                u = samplers.invert_rounded_ngon_sample(_turn(p0, -fan[1]), fan[0], self.roundness)
-            if self.rim != 0.0:
-                x = u[..., 1]  # the squared radial fraction; u₁ is its CDF
-                u = np.stack([u[..., 0], (1.0 - self.rim) * x + self.rim * x * x], axis=-1)
-            return u
-        if self.rim != 0.0:
-            fraction = self._radial_fraction_at_zero(p0)
-            x = fraction * fraction
-            original = np.sqrt((1.0 - self.rim) * x + self.rim * x * x)
-            safe = np.where(fraction > 0.0, fraction, 1.0)
-            p0 = p0 * np.where(fraction > 0.0, original / safe, 0.0)[..., None]
-        if family == "circle":
-            return samplers.invert_circle_sample(p0)
-        w, h = (0.5, 0.5) if family == "square" else (0.5 * self.aspect, 0.5 / self.aspect)
-        return np.stack([p0[..., 0] / (2.0 * w) + 0.5, p0[..., 1] / (2.0 * h) + 0.5], axis=-1)
+        return self._behaviour.invert_at_zero(self._to_zero(p, channel)[0], self.rim)
 
     def shader_params(self, field_position=None) -> dict:
         """Values of the WGSL ``ApertureParams`` (:data:`APERTURE_PARAM_FIELDS`) for this aperture."""
@@ -679,12 +586,6 @@ class Aperture:
         return text
 
 
-def _turn(p: np.ndarray, angle_rad: float) -> np.ndarray:
-    """Points turned counter-clockwise by ``angle_rad``."""
-    c, s = math.cos(angle_rad), math.sin(angle_rad)
-    return np.stack([c * p[..., 0] - s * p[..., 1], s * p[..., 0] + c * p[..., 1]], axis=-1)
-
-
 def _field_position(value) -> np.ndarray:
     """A field position q as a float (2,) array; InputError naming ``field_position`` otherwise."""
     q = np.asarray(value, dtype=object)
@@ -726,41 +627,6 @@ def aperture_rows_to_image(grid) -> np.ndarray:
            [0, 1]])
     """
     return np.ascontiguousarray(np.flip(np.asarray(grid), axis=0))
-
-
-#: Transmission level of a mask's drawn outline (design.md §3b), as a share of its largest transmission.
-MASK_OUTLINE_LEVEL = 0.5
-
-
-def _mask_outline(mask: MaskTable) -> Outline:
-    """The mask's outline at angle 0: its contour at MASK_OUTLINE_LEVEL of the largest transmission.
-
-    Marching squares (scikit-image ``find_contours``) on the image padded with
-    zeros, so every loop closes; vertices lie on lines between cell centres.
-    Loops run counter-clockwise around transmitting parts.
-    """
-    from skimage.measure import find_contours
-
-    image = np.pad(mask.transmission, 1)
-    h, w = mask.shape
-    loops = []
-    for contour in find_contours(image, MASK_OUTLINE_LEVEL * float(image.max())):
-        xy = np.stack([(contour[:, 1] - 0.5 - 0.5 * w) * mask.cell, (0.5 * h - contour[:, 0] + 0.5) * mask.cell], axis=-1)
-        if np.allclose(xy[0], xy[-1]):
-            xy = xy[:-1]
-        if len(xy) >= 3:
-            loops.append(xy)
-    # find_contours keeps the high values on one side; make the outer loops counter-clockwise.
-    signed = sum(0.5 * float(np.sum(xy[:, 0] * np.roll(xy[:, 1], -1) - np.roll(xy[:, 0], -1) * xy[:, 1])) for xy in loops)
-    if signed < 0.0:
-        loops = [xy[::-1] for xy in loops]
-    return Outline(tuple(tuple(Segment(tuple(a), tuple(b)) for a, b in zip(xy, np.roll(xy, -1, axis=0))) for xy in loops))
-
-
-def _fan_radii(aperture: Aperture) -> np.ndarray:
-    if aperture.spec.family == "star":
-        return np.tile([samplers.STAR_OUTER_RADIUS, samplers.STAR_INNER_RADIUS], 5)
-    return np.full(aperture.blades, samplers.ngon_circumradius(aperture.blades))
 
 
 def parse_shape(text: str) -> tuple[str, int | None]:
