@@ -1,7 +1,10 @@
 """Aperture shapes (design.md §3), their real-lens features (§3b) and their samplers.
 
 The samplers ``sample_<shape>(u)`` are the NumPy twins of the WGSL functions
-of the same names in ``shaders/apertures.wgsl``.
+of the same names in ``shaders/apertures.wgsl``. The :class:`Aperture`
+(``shapes``) is the one model; ``registry`` names the shapes, ``behaviours``
+holds what each sampler family does at angle 0, ``parameters`` the features'
+value types, ``frames`` the image ↔ aperture conversion.
 """
 
 from bokehfit.apertures.samplers import (
@@ -30,24 +33,10 @@ from bokehfit.apertures.samplers import (
 )
 from bokehfit.apertures.mask import MaskTable, invert_mask_sample, load_mask, mask_pdf, sample_mask
 from bokehfit.apertures.outline import Arc, Outline, Segment
-from bokehfit.apertures.shapes import (
-    APERTURE_PARAM_FIELDS,
-    CHANNELS,
-    FEATURES,
-    SHADER_FAMILIES,
-    SHAPES,
-    Aperture,
-    Chromatic,
-    ParameterSpec,
-    ShapeSpec,
-    Vignetting,
-    aperture_rows_to_image,
-    aperture_to_image,
-    canonical_angle,
-    image_to_aperture,
-    make_aperture,
-    parse_shape,
-)
+from bokehfit.apertures.frames import aperture_rows_to_image, aperture_to_image, image_to_aperture
+from bokehfit.apertures.parameters import APERTURE_PARAM_FIELDS, CHANNELS, FEATURES, Chromatic, ParameterSpec, Vignetting
+from bokehfit.apertures.registry import SHADER_FAMILIES, SHAPES, ShapeSpec, canonical_angle, parse_shape
+from bokehfit.apertures.shapes import Aperture, make_aperture
 
 __all__ = [
     "APERTURE_PARAM_FIELDS",

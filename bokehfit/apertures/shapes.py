@@ -17,8 +17,10 @@ squeeze, vignetting and colour to every family alike. The custom ``mask``
 shape of §3b is tabulated (:class:`~bokehfit.apertures.mask.MaskTable`): its
 density is the transmission, its outline the 50 % transmission contour.
 
-:func:`image_to_aperture` is the one conversion from image offsets to the
-aperture frame (design.md §2).
+The shape registry and the parser of names are in :mod:`bokehfit.apertures.registry`,
+the features' value types in :mod:`bokehfit.apertures.parameters`, and the one
+conversion from image offsets to the aperture frame (design.md §2) in
+:mod:`bokehfit.apertures.frames`; their names are importable from here too.
 """
 
 from __future__ import annotations
@@ -26,16 +28,23 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
-import re
 from collections.abc import Mapping
 from dataclasses import dataclass
+
 import numpy as np
 
 from bokehfit.apertures import samplers
 from bokehfit.apertures.behaviours import MASK_OUTLINE_LEVEL  # noqa: F401  (the docs cite it here)
-from bokehfit.apertures.behaviours import BEHAVIOURS, ShapeBehaviour, behaviour_of
+from bokehfit.apertures.behaviours import ShapeBehaviour, behaviour_of
+from bokehfit.apertures.frames import aperture_rows_to_image, aperture_to_image, image_to_aperture
 from bokehfit.apertures.mask import MaskTable, load_mask
 from bokehfit.apertures.outline import Outline, Segment, clip_by_circle
+from bokehfit.apertures.parameters import (
+    APERTURE_PARAM_FIELDS, CHANNELS, FEATURES, VERTICES_MAX_ERROR, Chromatic, ParameterSpec, Vignetting,
+)
+from bokehfit.apertures.registry import (
+    DEFAULT_SLIT_ASPECT, MAX_BLADES, SHADER_FAMILIES, SHAPES, SLIT_ASPECT_RANGE, ShapeSpec, canonical_angle, parse_shape,
+)
 from bokehfit.errors import InputError, check_finite
 from bokehfit.validate import RANGES, check
 
@@ -57,133 +66,6 @@ __all__ = [
     "make_aperture",
     "parse_shape",
 ]
-
-#: Slit aspect (width / height) when none is given (design.md §3).
-DEFAULT_SLIT_ASPECT = 0.3
-#: Most blades an ``ngon`` may have; beyond this it is a circle for every purpose.
-MAX_BLADES = 64
-#: Slit aspects outside this range are refused (the shape would be a line).
-SLIT_ASPECT_RANGE = (1e-3, 1e3)
-
-#: The sampler families of shaders/apertures.wgsl, in the order of their
-#: ``SHAPE_*`` constants (the constants are generated from this tuple).
-SHADER_FAMILIES = ("circle", "square", "slit", "ngon", "star", "mask")
-
-
-@dataclass(frozen=True)
-class ShapeSpec:
-    """One registry entry: how a named shape is drawn, sampled and rendered."""
-
-    name: str
-    family: str  #: sampler family in SHADER_FAMILIES
-    fixed_blades: int | None = None  #: blade count fixed by the name (triangle: 3)
-    takes_blades: bool = False  #: the user chooses the blade count (ngon)
-    takes_aspect: bool = False  #: the user chooses the aspect (slit)
-    symmetry: float | None = None  #: degrees; None: 360°/blades (n-gons) or no angle (circle)
-    tabulated: bool = False  #: drawn from a transmission image (``mask``), not an outline
-
-    @property
-    def shader_id(self) -> int:
-        return SHADER_FAMILIES.index(self.family)
-
-    @property
-    def rounds(self) -> bool:
-        """Whether ``roundness`` applies: the blade edges of n-gons (design.md §3b)."""
-        return BEHAVIOURS[self.family].rounds
-
-    def symmetry_deg(self, blades: int | None) -> float | None:
-        """Smallest rotation mapping the shape onto itself; None for the circle."""
-        if self.symmetry is not None:
-            return self.symmetry
-        return 360.0 / blades if BEHAVIOURS[self.family].has_angle else None
-
-
-SHAPES: dict[str, ShapeSpec] = {
-    spec.name: spec
-    for spec in (
-        ShapeSpec("circle", "circle"),
-        ShapeSpec("square", "square", fixed_blades=4, symmetry=90.0),
-        ShapeSpec("slit", "slit", takes_aspect=True, symmetry=180.0),
-        ShapeSpec("triangle", "ngon", fixed_blades=3),
-        ShapeSpec("pentagon", "ngon", fixed_blades=5),
-        ShapeSpec("hexagon", "ngon", fixed_blades=6),
-        ShapeSpec("star", "star", symmetry=72.0),
-        ShapeSpec("ngon", "ngon", takes_blades=True),
-        ShapeSpec("mask", "mask", symmetry=360.0, tabulated=True),
-    )
-}
-
-
-def canonical_angle(angle_deg: float, symmetry_deg: float | None) -> float | None:
-    """``angle_deg`` reduced to [0, symmetry); None where the angle is meaningless."""
-    if symmetry_deg is None:
-        return None
-    reduced = math.fmod(angle_deg, symmetry_deg)
-    if reduced < 0.0:
-        reduced += symmetry_deg
-    return 0.0 if reduced >= symmetry_deg else reduced
-
-
-@dataclass(frozen=True)
-class Vignetting:
-    """Cat-eye vignetting (design.md §3b): the barrel's circle, radius·R0 at shift·R0·q."""
-
-    radius: float
-    shift: float = 0.0
-
-
-@dataclass(frozen=True)
-class Chromatic:
-    """Longitudinal colour (design.md §3b): red and blue disc diameters over green's, minus 1."""
-
-    red: float
-    blue: float
-
-
-@dataclass(frozen=True)
-class ParameterSpec:
-    """One parameter a fit may vary: its name (a keyword of :meth:`Aperture.replace`), bounds and unit.
-
-    ``periodic`` is the period where the parameter wraps (the angle: the
-    shape's symmetry, in degrees), None otherwise.
-    """
-
-    name: str
-    bounds: tuple[float, float]
-    unit: str = ""
-    periodic: float | None = None
-
-
-#: The §3b features in the order :attr:`Aperture.parameters` lists them.
-FEATURES = ("roundness", "squeeze", "rim", "vignetting", "chromatic")
-#: Colour channels of :meth:`Aperture.sample`, in the order of the WGSL ``CHANNEL_*`` ids
-#: (generated from this tuple); green (and None) is the reference size.
-CHANNELS = ("green", "red", "blue")
-#: Chord error of :meth:`Aperture.vertices` where the outline has arcs (unit-area units).
-VERTICES_MAX_ERROR = 1e-6
-
-#: The one description of the WGSL ``ApertureParams`` struct (bokehfit.gpu.layout
-#: builds the struct and its NumPy dtype from it; :meth:`Aperture.shader_params`
-#: fills it). ``vignetting_radius`` 0 means no vignetting; ``field_position`` is the q of
-#: :meth:`Aperture.sample` (half-diagonals, y up).
-APERTURE_PARAM_FIELDS = (
-    ("shape", "u32"),
-    ("blades", "u32"),
-    ("aspect", "f32"),
-    ("roundness", "f32"),
-    ("cos_angle", "f32"),
-    ("sin_angle", "f32"),
-    ("squeeze", "f32"),
-    ("rim", "f32"),
-    ("vignetting_radius", "f32"),
-    ("vignetting_shift", "f32"),
-    ("field_position", "vec2f"),
-    ("chromatic_red", "f32"),
-    ("chromatic_blue", "f32"),
-    ("mask_width", "u32"),
-    ("mask_height", "u32"),
-    ("mask_cell", "f32"),
-)
 
 
 @dataclass(frozen=True)
@@ -592,68 +474,6 @@ def _field_position(value) -> np.ndarray:
     if q.shape != (2,):
         raise InputError(f"field_position must be a pair (x, y) in half-diagonals, y up (got {value!r})")
     return np.array([check("field_position", v) for v in q], dtype=np.float64)
-
-
-def image_to_aperture(offsets_rc) -> np.ndarray:
-    """Image offsets (row, col) from a centre → aperture-frame (x, y): x = col, y = −row (design.md §2).
-
-    The one conversion from the image's row-down frame to the aperture's y-up frame.
-
-    Examples
-    --------
-    >>> image_to_aperture([[2.0, 3.0]])
-    array([[ 3., -2.]])
-    """
-    offsets = np.asarray(offsets_rc, dtype=np.float64)
-    return np.stack([offsets[..., 1], -offsets[..., 0]], axis=-1)
-
-
-def aperture_to_image(points_xy) -> np.ndarray:
-    """Inverse of :func:`image_to_aperture`: aperture (x, y) → image offsets (row, col) = (−y, x)."""
-    points = np.asarray(points_xy, dtype=np.float64)
-    return np.stack([-points[..., 1], points[..., 0]], axis=-1)
-
-
-def aperture_rows_to_image(grid) -> np.ndarray:
-    """A grid whose rows run up in aperture y (first row lowest) → image row order (row downward).
-
-    The row-order face of :func:`aperture_to_image` (image row = −y): for
-    kernels computed or rasterised on the aperture frame's y-up grid.
-
-    Examples
-    --------
-    >>> aperture_rows_to_image([[0, 1], [2, 3]])
-    array([[2, 3],
-           [0, 1]])
-    """
-    return np.ascontiguousarray(np.flip(np.asarray(grid), axis=0))
-
-
-def parse_shape(text: str) -> tuple[str, int | None]:
-    """A shape's name as people write it → (registry shape, blade count or None).
-
-    The one parser of shape names: ``compare --shapes``, ``kernel --shape``,
-    ``similarity`` and :func:`make_aperture` all go through it. ``ngon(9)``
-    (spaces and case ignored) is the ngon with 9 blades; a registry name is
-    itself with no blade count.
-
-    Examples
-    --------
-    >>> parse_shape("ngon(9)"), parse_shape("Hexagon")
-    (('ngon', 9), ('hexagon', None))
-    """
-    if not isinstance(text, str):
-        raise InputError(f"shape must be one of {', '.join(SHAPES)} or ngon(N) (got {text!r})")
-    name = text.strip().lower()
-    if name in SHAPES:
-        return name, None
-    match = re.fullmatch(r"ngon\s*\(\s*(\d+)\s*\)", name)
-    if match is None:
-        raise InputError(f"shape must be one of {', '.join(SHAPES)} or ngon(N) (got {text!r})")
-    blades = int(match.group(1))
-    if not 3 <= blades <= MAX_BLADES:
-        raise InputError(f"blades must be an integer from 3 to {MAX_BLADES} for shape 'ngon' (got {text!r})")
-    return "ngon", blades
 
 
 def make_aperture(
