@@ -23,7 +23,8 @@ import bokehfit
 from bokehfit.bench.compare import compare_timing
 from bokehfit.bench.fit import budget_sweep
 from bokehfit.bench.report import compare_table, fit_table, markdown_table
-from bokehfit.outputs import check_output_path, write_json
+from bokehfit.output_paths import check_output_path
+from bokehfit.outputs import write_json
 
 
 def main() -> None:

@@ -21,7 +21,8 @@ from pathlib import Path
 
 from bokehfit.bench.kernels import kernel_sweep
 from bokehfit.bench.report import kernel_table, markdown_table
-from bokehfit.outputs import check_output_path, write_json
+from bokehfit.output_paths import check_output_path
+from bokehfit.outputs import write_json
 
 
 def main() -> None:

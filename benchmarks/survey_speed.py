@@ -46,7 +46,8 @@ from PIL import Image
 
 import bokehfit
 from bokehfit.apertures import make_aperture
-from bokehfit.outputs import check_output_path, write_json
+from bokehfit.output_paths import check_output_path
+from bokehfit.outputs import write_json
 from bokehfit.synthetic import SyntheticDisc, encode_srgb8, render_discs
 
 WIDTH_PX, HEIGHT_PX = 512, 384

@@ -5,7 +5,9 @@ from __future__ import annotations
 import argparse
 import sys
 
-from bokehfit.outputs import check_output_path, encode_text, write_bytes_atomic, write_json
+from bokehfit.output_paths import check_output_path
+from bokehfit.outputs import write_bytes_atomic, write_json
+from bokehfit.text_encoding import encode_text
 
 __all__ = ["add_parser", "run"]
 

@@ -21,7 +21,9 @@ from bokehfit.discs import COMPARE_MIN_DIAMETER_PX, DEFAULT_MAX_DIAMETER_PX, DEF
 from bokehfit.errors import InputError, NoResultError, check_positive
 from bokehfit.fit import FOCUS_SIDES
 from bokehfit.optics import LENS_MODELS, SIZE_CONVENTIONS
-from bokehfit.outputs import check_output_path, encode_text, make_folder, write_bytes_atomic, write_json
+from bokehfit.output_paths import check_output_path, make_folder
+from bokehfit.outputs import write_bytes_atomic, write_json
+from bokehfit.text_encoding import encode_text
 
 __all__ = ["add_parser", "run", "summary"]
 

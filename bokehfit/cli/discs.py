@@ -10,7 +10,8 @@ from bokehfit import __version__
 from bokehfit.discs import DEFAULT_MAX_DIAMETER_PX, DEFAULT_MIN_DIAMETER_PX, DiscSearch, find_discs
 from bokehfit.errors import InputError, NoResultError
 from bokehfit.io import load_photo
-from bokehfit.outputs import check_output_path, write_json, write_png
+from bokehfit.output_paths import check_output_path
+from bokehfit.outputs import write_json, write_png
 
 __all__ = ["add_parser", "run", "SCHEMA_VERSION"]
 

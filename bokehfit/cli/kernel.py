@@ -10,7 +10,8 @@ from bokehfit.apertures import SHAPES
 from bokehfit.kernels import DEFAULT_SAMPLES, METHODS, SAMPLINGS, SIDES, Kernel, compute_kernel
 from bokehfit.kernels.accuracy import MIN_TOLERANCE
 from bokehfit.errors import InputError
-from bokehfit.outputs import KERNEL_FORMATS, check_output_path, write_exr, write_kernel_image, write_png
+from bokehfit.output_paths import check_output_path
+from bokehfit.outputs import KERNEL_FORMATS, write_exr, write_kernel_image, write_png
 from bokehfit.cli.aperture_args import add_feature_arguments, aperture_from_args
 from bokehfit.cli.arg_types import arg_type, interval, pair_arg, shape_arg
 

@@ -12,7 +12,8 @@ from pathlib import Path
 from bokehfit import __version__
 from bokehfit.apertures import SHAPES
 from bokehfit.errors import InputError
-from bokehfit.outputs import check_output_path, write_json
+from bokehfit.output_paths import check_output_path
+from bokehfit.outputs import write_json
 from bokehfit.scene import (
     FOCAL_LENGTH_MM,
     RENDER_FORMATS,

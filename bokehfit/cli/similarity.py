@@ -11,7 +11,8 @@ from bokehfit.cli.arg_types import pair_arg
 from bokehfit.errors import InputError
 from bokehfit.metrics import METRICS, angle_error, aperture_outline, best_rotation_deg, compare_outlines
 from bokehfit.metrics.outlines import DEFAULT_POINTS, densify
-from bokehfit.outputs import check_output_path, write_json
+from bokehfit.output_paths import check_output_path
+from bokehfit.outputs import write_json
 
 __all__ = ["add_parser", "run", "SCHEMA_VERSION"]
 

@@ -120,7 +120,7 @@ def _stop_at_once(signum, frame):
 
 
 def run(args: argparse.Namespace):
-    from bokehfit.outputs import check_output_path
+    from bokehfit.output_paths import check_output_path
     from bokehfit.surveys import export_parquet, prepare_survey, write_report
     from bokehfit.surveys.run import run_survey
     from bokehfit.surveys.store import SurveyStore

@@ -66,7 +66,7 @@ def check_file(path: Path) -> None:
 
 def read_file(path: Path) -> bytes:
     """The file's bytes; only a regular file is opened (non-blocking, so a FIFO put there since the check can't stall)."""
-    from bokehfit.outputs import open_regular
+    from bokehfit.regular_files import open_regular
 
     try:
         with open_regular(path) as file:

@@ -98,8 +98,10 @@ def survey_table(db: str | os.PathLike):
 
 def write_report(db: str | os.PathLike, report: str | os.PathLike, *, command_line: str = "") -> Path:
     """Write the lens fingerprint page (:mod:`bokehfit.surveys.report`) of a survey database, atomically."""
-    from bokehfit.outputs import check_output_path, encode_text, write_bytes_atomic
+    from bokehfit.output_paths import check_output_path
+    from bokehfit.outputs import write_bytes_atomic
     from bokehfit.surveys.report import build_report
+    from bokehfit.text_encoding import encode_text
 
     path = check_output_path(report, (".html",), inputs=[db])
     with SurveyStore(db, read_only=True) as store:
@@ -114,7 +116,8 @@ def export_parquet(db: str | os.PathLike, parquet: str | os.PathLike) -> Path:
     import pyarrow.parquet
 
     from bokehfit import __version__
-    from bokehfit.outputs import check_output_path, write_atomic
+    from bokehfit.output_paths import check_output_path
+    from bokehfit.outputs import write_atomic
 
     path = check_output_path(parquet, (".parquet",), inputs=[db])
     with SurveyStore(db, read_only=True) as store:

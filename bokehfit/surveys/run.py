@@ -31,11 +31,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from bokehfit.errors import InputError
-from bokehfit.outputs import encode_text, remove_stale_temporaries, write_bytes_atomic, write_json
+from bokehfit.output_temporaries import remove_stale_temporaries
+from bokehfit.outputs import write_bytes_atomic, write_json
 from bokehfit.surveys.files import content_hash
 from bokehfit.surveys.scheduler import check_scheduler
 from bokehfit.surveys.store import SurveyStore, reports_folder, row_from_record
 from bokehfit.surveys.work import FAILURE_STATUSES, PhotoTask, init_worker, survey_photo, thread_environment
+from bokehfit.text_encoding import encode_text
 
 __all__ = ["SurveyRun", "run_survey", "IN_FLIGHT_PER_WORKER", "MAX_WORKER_CRASHES"]
 

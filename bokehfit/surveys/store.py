@@ -102,7 +102,7 @@ def _check_database_file(path: Path, read_only: bool) -> None:
     Checked with ``stat`` and a read of the header (``O_NONBLOCK``) before DuckDB sees the file,
     so that a FIFO, a device, an SQLite or other file is refused in one line, never opened by DuckDB.
     """
-    from bokehfit.outputs import file_kind, open_regular
+    from bokehfit.regular_files import file_kind, open_regular
 
     try:
         os.fsencode(path).decode("utf-8")
@@ -212,7 +212,7 @@ def _storable(value):
         try:
             value.encode("utf-8")
         except UnicodeEncodeError:
-            from bokehfit.outputs import replace_surrogates
+            from bokehfit.text_encoding import replace_surrogates
 
             return replace_surrogates(value)
     return value

@@ -88,7 +88,7 @@ def test_output_naming_an_existing_fifo_is_refused_without_opening_it(tmp_path, 
 
 @needs_fifo
 def test_is_bokehfit_output_does_not_wait_on_a_fifo(tmp_path):
-    from bokehfit.outputs import is_bokehfit_output
+    from bokehfit.output_marks import is_bokehfit_output
 
     os.mkfifo(tmp_path / "x.json")
     result = []
@@ -439,8 +439,8 @@ def test_names_that_are_not_utf8_reach_every_output(tmp_path):
     code, stdout, stderr = _run("kernel", "--size", "16", "--diameter-px", "5", "--out", folder + b"/k\xfe.npy", env=strict)
     assert code == 0 and "wrote" in stdout, stderr
     # the HTML page and the survey's rows: the name's bad bytes become U+FFFD
-    from bokehfit.outputs import encode_text
     from bokehfit.surveys.store import row_from_record
+    from bokehfit.text_encoding import encode_text
 
     assert encode_text(os.fsdecode(b"<p>photo\xff.png</p>")) == "<p>photo\ufffd.png</p>".encode()
     row = row_from_record({"sha256": "0" * 64, "path": os.fsdecode(photo), "status": "unreadable"},

@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 
 from bokehfit.errors import InputError
+from bokehfit.output_marks import is_bokehfit_output
+from bokehfit.output_paths import check_output_path
 from bokehfit.outputs import (
     WRITE_PAUSE_ENV,
-    check_output_path,
-    is_bokehfit_output,
     write_atomic,
     write_bytes_atomic,
     write_json,
