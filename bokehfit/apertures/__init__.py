@@ -4,7 +4,8 @@ The samplers ``sample_<shape>(u)`` are the NumPy twins of the WGSL functions
 of the same names in ``shaders/apertures.wgsl``. The :class:`Aperture`
 (``shapes``) is the one model; ``registry`` names the shapes, ``behaviours``
 holds what each sampler family does at angle 0, ``parameters`` the features'
-value types, ``frames`` the image ↔ aperture conversion.
+value types, ``features`` the features' records (what a fit and a report know of
+each), ``frames`` the image ↔ aperture conversion.
 """
 
 from bokehfit.apertures.samplers import (
@@ -34,7 +35,8 @@ from bokehfit.apertures.samplers import (
 from bokehfit.apertures.mask import MaskTable, invert_mask_sample, load_mask, mask_pdf, sample_mask
 from bokehfit.apertures.outline import Arc, Outline, Segment
 from bokehfit.apertures.frames import aperture_rows_to_image, aperture_to_image, image_to_aperture
-from bokehfit.apertures.parameters import APERTURE_PARAM_FIELDS, CHANNELS, FEATURES, Chromatic, ParameterSpec, Vignetting
+from bokehfit.apertures.parameters import APERTURE_PARAM_FIELDS, CHANNELS, Chromatic, ParameterSpec, Vignetting
+from bokehfit.apertures.features import FEATURE_SPECS, FEATURES, FeatureEvidence, FeatureSpec
 from bokehfit.apertures.registry import SHADER_FAMILIES, SHAPES, ShapeSpec, canonical_angle, parse_shape
 from bokehfit.apertures.shapes import Aperture, make_aperture
 
@@ -44,6 +46,9 @@ __all__ = [
     "CHANNELS",
     "Chromatic",
     "FEATURES",
+    "FEATURE_SPECS",
+    "FeatureEvidence",
+    "FeatureSpec",
     "MaskTable",
     "Outline",
     "ParameterSpec",

@@ -2,8 +2,8 @@
 
 :class:`Vignetting` and :class:`Chromatic` are the values of two features of
 design.md §3b, :class:`ParameterSpec` one parameter a fit may vary;
-``FEATURES`` and ``CHANNELS`` name the features and the colour channels in
-their order, and ``APERTURE_PARAM_FIELDS`` describes the WGSL
+``CHANNELS`` names the colour channels in their order (the features' names and
+records are in :mod:`bokehfit.apertures.features`), and ``APERTURE_PARAM_FIELDS`` describes the WGSL
 ``ApertureParams`` struct that :meth:`~bokehfit.apertures.shapes.Aperture.shader_params` fills.
 """
 
@@ -14,7 +14,6 @@ from dataclasses import dataclass
 __all__ = [
     "APERTURE_PARAM_FIELDS",
     "CHANNELS",
-    "FEATURES",
     "VERTICES_MAX_ERROR",
     "Chromatic",
     "ParameterSpec",
@@ -52,8 +51,6 @@ class ParameterSpec:
     periodic: float | None = None
 
 
-#: The §3b features in the order :attr:`Aperture.parameters` lists them.
-FEATURES = ("roundness", "squeeze", "rim", "vignetting", "chromatic")
 #: Colour channels of :meth:`Aperture.sample`, in the order of the WGSL ``CHANNEL_*`` ids
 #: (generated from this tuple); green (and None) is the reference size.
 CHANNELS = ("green", "red", "blue")

@@ -18,7 +18,8 @@ shape of §3b is tabulated (:class:`~bokehfit.apertures.mask.MaskTable`): its
 density is the transmission, its outline the 50 % transmission contour.
 
 The shape registry and the parser of names are in :mod:`bokehfit.apertures.registry`,
-the features' value types in :mod:`bokehfit.apertures.parameters`, and the one
+the features' value types in :mod:`bokehfit.apertures.parameters` and their records (what a
+fit and a report know of each) in :mod:`bokehfit.apertures.features`, and the one
 conversion from image offsets to the aperture frame (design.md §2) in
 :mod:`bokehfit.apertures.frames`; their names are importable from here too.
 """
@@ -36,11 +37,12 @@ import numpy as np
 from bokehfit.apertures import samplers
 from bokehfit.apertures.behaviours import MASK_OUTLINE_LEVEL  # noqa: F401  (the docs cite it here)
 from bokehfit.apertures.behaviours import ShapeBehaviour, behaviour_of
+from bokehfit.apertures.features import FEATURE_SPECS, FEATURES
 from bokehfit.apertures.frames import aperture_rows_to_image, aperture_to_image, image_to_aperture
 from bokehfit.apertures.mask import MaskTable, load_mask
 from bokehfit.apertures.outline import Outline, Segment, clip_by_circle
 from bokehfit.apertures.parameters import (
-    APERTURE_PARAM_FIELDS, CHANNELS, FEATURES, VERTICES_MAX_ERROR, Chromatic, ParameterSpec, Vignetting,
+    APERTURE_PARAM_FIELDS, CHANNELS, VERTICES_MAX_ERROR, Chromatic, ParameterSpec, Vignetting,
 )
 from bokehfit.apertures.registry import (
     DEFAULT_SLIT_ASPECT, MAX_BLADES, SHADER_FAMILIES, SHAPES, SLIT_ASPECT_RANGE, ShapeSpec, canonical_angle, parse_shape,
@@ -134,7 +136,7 @@ class Aperture:
     def display_name(self) -> str:
         """The shape's name for people: ``hexagon``, ``9-blade polygon``, ``rounded 9-blade polygon``."""
         name = f"{self.blades}-blade polygon" if self.spec.takes_blades else self.shape
-        return f"rounded {name}" if "roundness" in self.enabled_features else name
+        return f"rounded {name}" if self.has_roundness else name
 
     def is_named(self, text: str) -> bool:
         """Whether ``text`` names this aperture's shape (see :func:`parse_shape`).
@@ -159,10 +161,19 @@ class Aperture:
         return canonical_angle(self.angle_deg, self.symmetry_deg)
 
     @property
+    def has_aspect(self) -> bool:
+        """Whether the shape has an aspect of its own (the slit's width over height), one of :attr:`parameters`."""
+        return self.spec.takes_aspect
+
+    @property
+    def has_roundness(self) -> bool:
+        """Whether the blades' roundness is on, one of :attr:`parameters` (n-gons only)."""
+        return FEATURE_SPECS["roundness"].is_on(self)
+
+    @property
     def enabled_features(self) -> tuple[str, ...]:
         """The §3b features that are on: switched on by :meth:`with_features` or away from their neutral value."""
-        neutral = {"roundness": 0.0, "squeeze": 1.0, "rim": 0.0, "vignetting": None, "chromatic": None}
-        return tuple(f for f in FEATURES if f in self.features or getattr(self, f) != neutral[f])
+        return tuple(name for name, feature in FEATURE_SPECS.items() if feature.is_on(self))
 
     @property
     def parameters(self) -> dict[str, ParameterSpec]:
@@ -183,18 +194,12 @@ class Aperture:
 
         if self.symmetry_deg is not None:
             add("angle_deg", "angle_deg", "°", self.symmetry_deg, (0.0, self.symmetry_deg))
-        if self.spec.takes_aspect:
+        if self.has_aspect:
             add("aspect", "aspect")
-        on = self.enabled_features
-        for feature in ("roundness", "squeeze", "rim"):
-            if feature in on:
-                add(feature, feature)
-        if "vignetting" in on:
-            add("vignetting_radius", "vignetting_radius")
-            add("vignetting_shift", "vignetting_shift")
-        if "chromatic" in on:
-            add("chromatic_red", "chromatic")
-            add("chromatic_blue", "chromatic")
+        for feature in FEATURE_SPECS.values():
+            if feature.is_on(self):
+                for name, quantity in zip(feature.parameters, feature.quantities):
+                    add(name, quantity)
         return found
 
     @property
@@ -203,8 +208,7 @@ class Aperture:
 
         ``aperture.replace(**aperture.values)`` is the aperture again.
         """
-        pairs = {"vignetting_radius": ("vignetting", "radius"), "vignetting_shift": ("vignetting", "shift"),
-                 "chromatic_red": ("chromatic", "red"), "chromatic_blue": ("chromatic", "blue")}
+        pairs = {name: (f.name, member) for f in FEATURE_SPECS.values() for name, member in zip(f.parameters, f.members)}
         found = {}
         for name in self.parameters:
             if name in pairs:
@@ -265,7 +269,7 @@ class Aperture:
             "mask": self.mask,
         }
         shape = values.pop("shape", self.shape)
-        for pair, keys in (("vignetting", ("radius", "shift")), ("chromatic", ("red", "blue"))):
+        for pair, keys in ((f.name, f.members) for f in FEATURE_SPECS.values() if f.members):
             given = {key: values.pop(f"{pair}_{key}") for key in keys if f"{pair}_{key}" in values}
             if given:
                 current = fields[pair] if fields[pair] is not None else getattr(self.with_features(pair), pair)
