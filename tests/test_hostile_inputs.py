@@ -37,7 +37,9 @@ from bokehfit.io.exif import XMP_MAX_BYTES, build_exif, parse_xmp, read_exif_tag
 from bokehfit.io.photo import FLOAT_SAMPLE_MAX
 
 SRGB_WEIGHTS = np.array([0.2126, 0.7152, 0.0722])
-#: Seconds a crafted metadata block may take to read (the fixed parsers take milliseconds).
+#: CPU seconds a crafted metadata block may take to read (the fixed parsers take milliseconds;
+#: the old backtracking ones took half a minute). CPU time, not the wall clock: a busy machine
+#: may keep this process waiting for a core, which is no cost of the parser's.
 METADATA_SECONDS = 1.0
 #: Seconds a photo with ten thousand small discs may take to search (measured: about 4 s).
 MANY_DISCS_SECONDS = 60.0
@@ -183,10 +185,10 @@ def test_crafted_xmp_is_read_in_linear_time(warm):
     (cubic time: 4 kB took half a minute); expat reads 60 kB in milliseconds."""
     for spaces in (1500, 30_000):
         crafted = b"<aux:Lens>" + b" " * spaces + b"x" + b" " * spaces
-        start = time.perf_counter()
+        start = time.process_time()
         assert xmp_property(crafted, "aux:Lens") is None
         build_exif(read_exif_tags(None), crafted, width_px=600, height_px=400)
-        assert time.perf_counter() - start < METADATA_SECONDS, f"{len(crafted)} bytes of XMP took too long"
+        assert time.process_time() - start < METADATA_SECONDS, f"{len(crafted)} bytes of XMP took too long"
 
 
 def test_xmp_with_a_document_type_is_ignored():
@@ -218,18 +220,18 @@ def test_png_xmp_that_inflates_past_the_cap_is_skipped_with_a_note(tmp_path, war
     chunk = len(body).to_bytes(4, "big") + b"iTXt" + body + zlib.crc32(b"iTXt" + body).to_bytes(4, "big")
     path.write_bytes(data[:33] + chunk + data[33:])
     assert path.stat().st_size < 1 << 20
-    start = time.perf_counter()
+    start = time.process_time()
     photo = load_photo(path)
-    assert time.perf_counter() - start < METADATA_SECONDS
+    assert time.process_time() - start < METADATA_SECONDS
     assert f"bomb.png: its XMP packet is damaged or inflates past {XMP_MAX_BYTES} bytes; ignored" in photo.notes
 
 
 def test_png_metadata_chunks_over_the_cap_are_skipped_unread(tmp_path, warm):
     xmp = make_xmp({"aux:Lens": "x" * (XMP_MAX_BYTES + 10)})
     path = write_png(tmp_path / "big.png", np.zeros((32, 32, 3), np.uint8), xmp=xmp)
-    start = time.perf_counter()
+    start = time.process_time()
     photo = load_photo(path)
-    assert time.perf_counter() - start < METADATA_SECONDS
+    assert time.process_time() - start < METADATA_SECONDS
     assert photo.exif.lens is None
     assert photo.notes == (
         f"big.png: its iTXt chunk holds {len(xmp) + 22} bytes, more than the {XMP_MAX_BYTES} read; skipped",
@@ -240,10 +242,10 @@ def test_png_declaring_a_512_mib_chunk_is_refused_at_once(tmp_path, warm):
     path = write_png(tmp_path / "liar.png", np.zeros((32, 32, 3), np.uint8))
     data = path.read_bytes()
     path.write_bytes(data[:33] + (512 << 20).to_bytes(4, "big") + b"iTXtXML:com.adobe.xmp\x00" + data[33:])
-    start = time.perf_counter()
+    start = time.process_time()
     with pytest.raises(InputError, match="truncated PNG"):
         load_photo(path)
-    assert time.perf_counter() - start < METADATA_SECONDS
+    assert time.process_time() - start < METADATA_SECONDS
 
 
 @pytest.mark.parametrize(
