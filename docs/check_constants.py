@@ -3,15 +3,18 @@
 A threshold in a page of ``docs/`` (or the README) is written as its number followed, with no
 space, by an HTML comment naming the constant it restates; the rendered page shows only the number::
 
-    discs under 64<!-- bokehfit.compare.SMALL_DISC_PX --> px
-    less than 50<!-- bokehfit.compare.FAINT_CONTRAST_REL:% --> % above their background
-    at most 2,000<!-- bokehfit.discs.MAX_CANDIDATES:, --> candidates
+    discs under 64<!-- bokehfit.judging.SMALL_DISC_PX --> px
+    less than 50<!-- bokehfit.judging.FAINT_CONTRAST_REL:% --> % above their background
+    at most 2,000<!-- bokehfit.discs.search.MAX_CANDIDATES:, --> candidates
     bodies of 8<!-- bokehfit.view.bodies.MAX_BODY_BYTES:MiB --> MiB at most
 
 The comment holds a dotted name, a module of bokehfit then attributes and items: a constant
-(``bokehfit.compare.MIN_SURE_IOU``), a class attribute such as a dataclass field's default
-(``bokehfit.fit.FitOptions.max_discs``) or an entry (``bokehfit.validate.RANGES[rim].low``,
-``bokehfit.view.photo.KERNEL_SAMPLES[0]``: a key of digits is an index). It may be followed by
+(``bokehfit.judging.MIN_SURE_IOU``), a class attribute such as a dataclass field's default
+(``bokehfit.fit.result.FitOptions.max_discs``) or an entry (``bokehfit.validate.RANGES[rim].low``,
+``bokehfit.view.photo.KERNEL_SAMPLES[0]``: a key of digits is an index). The module is the one
+that defines the constant (or the class, or the table): a module that only imports it, such as
+a package's ``__init__`` (``bokehfit.discs.MAX_CANDIDATES``), is refused, so that a marker leads
+to the line to change and does not outlive the constant's move. It may be followed by
 ``:`` and a spec: an optional unit (``%`` times 100; ``k``, ``M`` over 10³, 10⁶; ``KiB``,
 ``MiB``, ``GiB`` over 2¹⁰, 2²⁰, 2³⁰; ``h`` seconds in hours), then an optional Python format
 spec (``,`` for thousands separators, ``.2f``, …). Without a format spec an integral value is
@@ -29,7 +32,9 @@ check (``tests/test_docs_constants.py``) on the ``bokehfit`` it imports, the ins
 from __future__ import annotations
 
 import argparse
+import ast
 import importlib
+import inspect
 import math
 import os
 import re
@@ -76,7 +81,8 @@ def _shown(path: Path) -> str:
 
 def resolve(name: str):
     """The value of a marker's name: the longest importable module prefix, then attributes and
-    items (``bokehfit.validate.RANGES[rim].low``: a key of digits is an index, any other a string)."""
+    items (``bokehfit.validate.RANGES[rim].low``: a key of digits is an index, any other a string).
+    The first attribute must be one the module defines (:func:`defined_names`), not a re-export."""
     dotted, _, rest = name.partition("[")
     parts = dotted.split(".")
     steps = re.findall(r"\.(\w+)|\[([\w.-]+)\]", "[" + rest if rest else "")
@@ -89,6 +95,10 @@ def resolve(name: str):
                 continue  # not a module: try a shorter prefix
             raise ConstantError(f"{name}: importing {module_name} failed: {error}") from error
         reached = ".".join(parts[:cut])
+        if hasattr(value, parts[cut]) and parts[cut] not in defined_names(value):
+            home = getattr(getattr(value, parts[cut]), "__module__", None)  # a class's or function's own module
+            where = home if isinstance(home, str) and home != reached else "the module that defines it"
+            raise ConstantError(f"{name}: {reached} only imports {parts[cut]}: name {where}")
         for attribute, key in [(part, "") for part in parts[cut:]] + steps:
             if attribute:
                 if not hasattr(value, attribute):
@@ -103,6 +113,40 @@ def resolve(name: str):
                 reached += f"[{key}]"
         return value
     raise ConstantError(f"{name}: no module of it can be imported")
+
+
+def defined_names(module) -> set[str]:
+    """The names ``module``'s own source binds at its top level (assignments, classes, functions), not its imports."""
+    try:
+        tree = ast.parse(inspect.getsource(module))
+    except (OSError, TypeError) as error:
+        raise ConstantError(f"the source of {module.__name__} cannot be read: {error}") from error
+    names: set[str] = set()
+
+    def bind(target: ast.expr) -> None:
+        if isinstance(target, ast.Name):
+            names.add(target.id)
+        elif isinstance(target, (ast.Tuple, ast.List)):
+            for element in target.elts:
+                bind(element)
+
+    def visit(body: list[ast.stmt]) -> None:
+        for node in body:
+            if isinstance(node, ast.Assign):
+                for target in node.targets:
+                    bind(target)
+            elif isinstance(node, (ast.AnnAssign, ast.AugAssign)):
+                bind(node.target)
+            elif isinstance(node, (ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)):
+                names.add(node.name)
+            elif isinstance(node, (ast.If, ast.Try, ast.With)):  # a block of the module's top level
+                for block in ("body", "orelse", "finalbody"):
+                    visit(getattr(node, block, []))
+                for handler in getattr(node, "handlers", []):
+                    visit(handler.body)
+
+    visit(tree.body)
+    return names
 
 
 def format_value(value, spec: str = "") -> str:

@@ -1,4 +1,4 @@
-"""The thresholds the docs state are the code's constants (docs/check_constants.py).
+"""The thresholds the docs state are the code's constants, named where they are defined (docs/check_constants.py).
 
 The check reads the constants of the ``bokehfit`` this suite imports: the installed wheel in CI.
 """
@@ -11,9 +11,9 @@ from pathlib import Path
 
 import pytest
 
-import bokehfit.compare
-import bokehfit.discs
-import bokehfit.fit
+import bokehfit.discs.search
+import bokehfit.fit.result
+import bokehfit.judging
 import bokehfit.validate
 import bokehfit.view.photo
 
@@ -64,14 +64,18 @@ def test_format_value_refuses(value, spec):
 
 
 def test_resolve_reads_constants_fields_and_entries():
-    assert cc.resolve("bokehfit.compare.MIN_SURE_IOU") == bokehfit.compare.MIN_SURE_IOU
-    assert cc.resolve("bokehfit.fit.FitOptions.max_discs") == bokehfit.fit.FitOptions().max_discs
+    assert cc.resolve("bokehfit.judging.MIN_SURE_IOU") == bokehfit.judging.MIN_SURE_IOU
+    assert cc.resolve("bokehfit.fit.result.FitOptions.max_discs") == bokehfit.fit.result.FitOptions().max_discs
     assert cc.resolve("bokehfit.validate.RANGES[rim].low") == bokehfit.validate.RANGES["rim"].low
     assert cc.resolve("bokehfit.view.photo.KERNEL_SAMPLES[1]") == bokehfit.view.photo.KERNEL_SAMPLES[1]
 
 
 @pytest.mark.parametrize("name, message", [
     ("bokehfit.compare.NO_SUCH_CONSTANT", "bokehfit.compare has no attribute NO_SUCH_CONSTANT"),
+    # A re-export names the wrong line to change: the constant's own module is asked for.
+    ("bokehfit.compare.MIN_SURE_IOU", "bokehfit.compare only imports MIN_SURE_IOU: name the module that defines it"),
+    ("bokehfit.discs.MAX_CANDIDATES", "bokehfit.discs only imports MAX_CANDIDATES: name the module that defines it"),
+    ("bokehfit.fit.FitOptions.max_discs", "bokehfit.fit only imports FitOptions: name bokehfit.fit.result"),
     ("bokehfit.no_such_module.LIMIT", "bokehfit has no attribute no_such_module"),
     ("bokehfit.validate.RANGES[no_such_range].low", "bokehfit.validate.RANGES has no item no_such_range"),
 ])
@@ -84,36 +88,36 @@ def test_check_lists_every_mismatch_with_its_line(tmp_path):
     page = tmp_path / "page.md"
     page.write_text(
         "# A page\n"
-        "sure from 999<!-- bokehfit.compare.MIN_SURE_IOU --> IoU, under 64<!-- bokehfit.compare.SMALL_DISC_PX --> px,\n"
-        "faint below 7<!-- bokehfit.compare.FAINT_CONTRAST_REL:% --> %, at most 2000<!-- bokehfit.discs.MAX_CANDIDATES:, -->\n"
-        "gone: 1<!-- bokehfit.compare.NO_SUCH_CONSTANT -->; in code `3<!-- bokehfit.fit.MIN_ELONGATED_DISCS -->`\n"
+        "sure from 999<!-- bokehfit.judging.MIN_SURE_IOU --> IoU, under 64<!-- bokehfit.judging.SMALL_DISC_PX --> px,\n"
+        "faint below 7<!-- bokehfit.judging.FAINT_CONTRAST_REL:% --> %, at most 2000<!-- bokehfit.discs.search.MAX_CANDIDATES:, -->\n"
+        "gone: 1<!-- bokehfit.judging.NO_SUCH_CONSTANT -->; in code `3<!-- bokehfit.fit.MIN_ELONGATED_DISCS -->`\n"
         "```\n5<!-- bokehfit.fit.FEATURE_DELTA_BIC -->\n```\n"
         "<!-- an ordinary comment -->\n",
         encoding="utf-8")
     problems, markers = cc.check([page])
     assert markers == 5  # those in code are examples, shown as text
     lines = [str(p) for p in problems]
-    iou = cc.format_value(bokehfit.compare.MIN_SURE_IOU)
-    faint = cc.format_value(bokehfit.compare.FAINT_CONTRAST_REL, "%")
-    candidates = cc.format_value(bokehfit.discs.MAX_CANDIDATES, ",")
-    assert lines[0] == f"{page}:2: wrote 999, constant bokehfit.compare.MIN_SURE_IOU is {iou}"
-    assert lines[1] == f"{page}:3: wrote 7, constant bokehfit.compare.FAINT_CONTRAST_REL is {faint}"
-    assert lines[2] == f"{page}:3: wrote 2000, constant bokehfit.discs.MAX_CANDIDATES is {candidates}"
-    assert lines[3].startswith(f"{page}:4: wrote 1, constant bokehfit.compare.NO_SUCH_CONSTANT is unknown (")
+    iou = cc.format_value(bokehfit.judging.MIN_SURE_IOU)
+    faint = cc.format_value(bokehfit.judging.FAINT_CONTRAST_REL, "%")
+    candidates = cc.format_value(bokehfit.discs.search.MAX_CANDIDATES, ",")
+    assert lines[0] == f"{page}:2: wrote 999, constant bokehfit.judging.MIN_SURE_IOU is {iou}"
+    assert lines[1] == f"{page}:3: wrote 7, constant bokehfit.judging.FAINT_CONTRAST_REL is {faint}"
+    assert lines[2] == f"{page}:3: wrote 2000, constant bokehfit.discs.search.MAX_CANDIDATES is {candidates}"
+    assert lines[3].startswith(f"{page}:4: wrote 1, constant bokehfit.judging.NO_SUCH_CONSTANT is unknown (")
     assert len(lines) == 4
 
 
 def test_write_rewrites_the_numbers_in_place(tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(sys, "path", list(sys.path))  # main() puts the checkout first
     page = tmp_path / "page.md"
-    page.write_text("sure from 999<!-- bokehfit.compare.MIN_SURE_IOU --> IoU; 3 MP of 7<!-- "
-                    "bokehfit.compare.FAINT_CONTRAST_REL:% --> %\n", encoding="utf-8")
+    page.write_text("sure from 999<!-- bokehfit.judging.MIN_SURE_IOU --> IoU; 3 MP of 7<!-- "
+                    "bokehfit.judging.FAINT_CONTRAST_REL:% --> %\n", encoding="utf-8")
     assert cc.main(["--check", str(page)]) == 1
     assert "wrote 999" in capsys.readouterr().err
     assert cc.main(["--write", str(page)]) == 0
-    iou = cc.format_value(bokehfit.compare.MIN_SURE_IOU)
-    faint = cc.format_value(bokehfit.compare.FAINT_CONTRAST_REL, "%")
-    assert page.read_text(encoding="utf-8") == (f"sure from {iou}<!-- bokehfit.compare.MIN_SURE_IOU --> IoU; 3 MP of "
-                                                f"{faint}<!-- bokehfit.compare.FAINT_CONTRAST_REL:% --> %\n")
+    iou = cc.format_value(bokehfit.judging.MIN_SURE_IOU)
+    faint = cc.format_value(bokehfit.judging.FAINT_CONTRAST_REL, "%")
+    assert page.read_text(encoding="utf-8") == (f"sure from {iou}<!-- bokehfit.judging.MIN_SURE_IOU --> IoU; 3 MP of "
+                                                f"{faint}<!-- bokehfit.judging.FAINT_CONTRAST_REL:% --> %\n")
     assert cc.main(["--check", str(page)]) == 0
     assert [p.name for p in tmp_path.iterdir()] == ["page.md"]  # no temporary left
