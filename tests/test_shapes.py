@@ -14,7 +14,8 @@ import pytest
 import shapely
 from scipy import integrate
 
-from bokehfit.apertures import CIRCLE_RADIUS, SHAPES, STAR_INNER_RADIUS, STAR_OUTER_RADIUS, make_aperture
+from bokehfit.apertures import CIRCLE_RADIUS, SHADER_FAMILIES, SHAPES, STAR_INNER_RADIUS, STAR_OUTER_RADIUS, make_aperture
+from bokehfit.apertures.behaviours import BEHAVIOURS
 from bokehfit.kernels.exact import coverage
 
 #: Circumradii of the unit-area outlines as design.md §3 prints them (7 decimals).
@@ -80,6 +81,14 @@ def test_polygon_area_is_one_and_counter_clockwise(param, angle):
 @pytest.mark.parametrize("blades", range(3, 65))
 def test_every_ngon_has_unit_area(blades):
     assert signed_area(make_aperture("ngon", blades=blades).vertices()) == pytest.approx(1.0, abs=1e-12)
+
+
+def test_every_sampler_family_has_a_behaviour_and_a_shader_id():
+    """The WGSL ``SHAPE_*`` ids are the behaviours' families, in their order; every named shape uses one."""
+    assert set(SHADER_FAMILIES) == set(BEHAVIOURS)
+    assert SHADER_FAMILIES == tuple(BEHAVIOURS)
+    assert {spec.family for spec in SHAPES.values()} == set(BEHAVIOURS)
+    assert [SHADER_FAMILIES[spec.shader_id] for spec in SHAPES.values()] == [spec.family for spec in SHAPES.values()]
 
 
 def test_circle_radius_and_no_outline():

@@ -360,7 +360,8 @@ class MaskShape(ShapeBehaviour):
         return Outline(tuple(tuple(Segment(tuple(a), tuple(b)) for a, b in zip(xy, np.roll(xy, -1, axis=0))) for xy in loops))
 
 
-#: The behaviour of each sampler family (``ShapeSpec.family``), by name.
+#: The behaviour of each sampler family (``ShapeSpec.family``), by name. Its order is that of the
+#: shaders' ``SHAPE_*`` ids (``registry.SHADER_FAMILIES`` is its keys): a new family goes last.
 BEHAVIOURS: dict[str, type[ShapeBehaviour]] = {
     "circle": CircleShape,
     "square": SquareShape,

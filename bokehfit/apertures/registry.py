@@ -35,8 +35,10 @@ MAX_BLADES = 64
 SLIT_ASPECT_RANGE = (1e-3, 1e3)
 
 #: The sampler families of shaders/apertures.wgsl, in the order of their
-#: ``SHAPE_*`` constants (the constants are generated from this tuple).
-SHADER_FAMILIES = ("circle", "square", "slit", "ngon", "star", "mask")
+#: ``SHAPE_*`` constants (the constants are generated from this tuple): the
+#: families that have a behaviour (:data:`~bokehfit.apertures.behaviours.BEHAVIOURS`),
+#: in its order, so that a family has a WGSL id exactly when it has a behaviour.
+SHADER_FAMILIES = tuple(BEHAVIOURS)
 
 
 @dataclass(frozen=True)
