@@ -112,7 +112,7 @@ def fit_photo(shape: str, blades: int | None, replicate: int, index: int, folder
     from bokehfit.synthetic import render_discs
 
     rng = np.random.default_rng(1000 * replicate + index)
-    aspect = SLIT_ASPECT if "aspect" in make_aperture(shape, blades=blades).parameters else None
+    aspect = SLIT_ASPECT if make_aperture(shape, blades=blades).has_aspect else None
     angle = float(rng.uniform(0.0, 360.0))
     diameter = float(np.exp(rng.uniform(*np.log(FIT_DIAMETERS))))
     truth, width, height = grid_layout(shape, blades, aspect, angle, [diameter] * DISCS_PER_PHOTO, rng, FIT_BRIGHTNESS)

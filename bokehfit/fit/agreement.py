@@ -83,7 +83,7 @@ def combine(family: Family, fits: list[PixelFit], screens: list[Screen]) -> Cand
         diameter_px=float(np.median(diameters)),
         screen_rms=float(np.median([s.rms for s in screens])),
         roundness=(float(np.median([f.aperture.roundness for f in fits]))
-                   if "roundness" in family.aperture.parameters else None),
+                   if family.aperture.has_roundness else None),
     )
 
 
@@ -94,7 +94,7 @@ def _elongation_doubt(family: Family, fits: list[PixelFit]) -> str | None:
     two merged discs looks like a slit; an elongated aperture shows as the
     same elongation on several discs.
     """
-    if "aspect" not in family.aperture.parameters:
+    if not family.aperture.has_aspect:
         return None
     if len(fits) < MIN_ELONGATED_DISCS:
         return f"an elongated aperture needs at least {MIN_ELONGATED_DISCS} discs that agree (only {len(fits)} fitted)"

@@ -51,7 +51,7 @@ def _outline_class(screens: list[Screen], ellipse: Ellipse | None) -> tuple[int,
     """How an aperture explains the outline, and the best non-elongated shape's misfit: class 0
     where a shape that is not elongated fits it to REGULAR_OUTLINE_MISFIT, 1 where only an elongated
     one does (a slit at the disc's own aspect, or an ellipse: a squeeze, a cat-eye), 2 where none does."""
-    round_misfit = min((s.rms for s in screens if "aspect" not in s.family.aperture.parameters), default=math.inf)
+    round_misfit = min((s.rms for s in screens if not s.family.aperture.has_aspect), default=math.inf)
     if round_misfit <= REGULAR_OUTLINE_MISFIT:
         return 0, round_misfit
     stretched = min([s.rms for s in screens] + ([ellipse.misfit] if ellipse is not None else []))

@@ -43,7 +43,7 @@ class Family:
     def rounded(self) -> Family | None:
         """The same shape with its blades' roundness fitted too (None where the shape has no blades to round)."""
         aperture = self.aperture
-        if not aperture.spec.rounds or "roundness" in aperture.enabled_features:
+        if not aperture.spec.rounds or aperture.has_roundness:
             return None
         return Family(aperture.with_features("roundness"))
 

@@ -4,7 +4,8 @@ The rim where discs show a profile, the vignetting where outer discs misfit the 
 central ones, the squeeze where the discs are stretched alike along the frame's axes
 (:func:`features_to_test`). A feature joins the model where it lowers the joint BIC by at least
 ``FEATURE_DELTA_BIC``, shows (a rim of at least ``MIN_RIM``) and does not sit at the end of its
-range (:func:`at_bound`).
+range (:func:`at_bound`). What each feature is (its parameters, start, bounds, least visible value)
+is its record in :data:`bokehfit.apertures.FEATURE_SPECS`; this module measures the discs' evidence.
 """
 
 from __future__ import annotations
@@ -14,7 +15,8 @@ import math
 import cv2
 import numpy as np
 
-from bokehfit.apertures import Aperture
+from bokehfit.apertures import FEATURE_SPECS, Aperture, FeatureEvidence
+from bokehfit.apertures.features import MIN_RIM, VIGNETTING_START_CUT, VIGNETTING_START_SHIFT  # noqa: F401  (re-exported)
 from bokehfit.discs import Disc
 from bokehfit.fit.agreement import MIN_ELONGATED_DISCS
 from bokehfit.fit.crop import DiscCrop
@@ -23,7 +25,8 @@ from bokehfit.fit.pixels import PixelFit
 from bokehfit.fit.vector import FIT_BOUNDS
 from bokehfit.fit.signature import Screen
 
-__all__ = ["add_feature", "at_bound", "features_to_test", "FEATURE_DELTA_BIC", "MIN_RIM", "VIGNETTING_MIN_FIELD"]
+__all__ = ["add_feature", "at_bound", "feature_evidence", "features_to_test", "FEATURE_DELTA_BIC", "MIN_RIM",
+           "VIGNETTING_MIN_FIELD"]
 
 #: A §3b feature joins the model when it lowers the joint BIC by at least this (Kass & Raftery: "very strong").
 FEATURE_DELTA_BIC = 10.0
@@ -31,10 +34,6 @@ FEATURE_DELTA_BIC = 10.0
 VIGNETTING_MIN_FIELD = 0.45
 #: ... and those discs' outlines misfit the shape at least this many times as much as the central ones'.
 VIGNETTING_MISFIT_RATIO = 1.5
-#: Its starting barrel: this shift (R0 per half-diagonal; negative: the barrel's centre towards the
-#: image centre, cutting a disc's outer side), and a radius that cuts the farthest disc this far inside its R0.
-VIGNETTING_START_SHIFT = -1.0
-VIGNETTING_START_CUT = 0.85
 #: The rim is tried where discs of at least this diameter (px; smaller ones show no profile) ...
 RIM_MIN_DIAMETER_PX = 20.0
 #: ... leave their rims brighter or darker than their centres under the flat model by this share of the contrast.
@@ -46,42 +45,41 @@ RIM_SIGNAL = 0.04
 SQUEEZE_AXIS_DEG = 10.0
 SQUEEZE_SIGNAL = 1.03
 SQUEEZE_AGREEMENT = 0.06
-#: Least |rim| reported: a smaller one changes a disc's profile by under 5 % (below what a photo's discs show).
-MIN_RIM = 0.05
 
 
 def at_bound(aperture: Aperture, feature: str) -> bool:
     """Whether a feature's fitted value sits at the end of its search range: the discs pushed it
-    there to absorb something else (a misfit shape, the surround), not to describe the lens."""
+    there to absorb something else (a misfit shape, the surround), not to describe the lens.
+
+    Both ends count, but for the parameters whose lower end the lens may have (the record's
+    ``upper_end_only``: a barrel at the largest radius cuts nothing the start did not).
+    """
+    spec = FEATURE_SPECS[feature]
     parameters = aperture.parameters
     values = aperture.values
-    for name in parameters:
-        if not name.startswith(feature):
+    for name in spec.parameters:
+        if name not in parameters:
             continue
         low, high = FIT_BOUNDS.get(name, parameters[name].bounds)
         span = high - low
-        if name != "vignetting_radius" and min(values[name] - low, high - values[name]) < 0.01 * span:
+        at_low = name not in spec.upper_end_only and values[name] - low < 0.01 * span
+        if at_low or high - values[name] < 0.01 * span:
             return True
-        if name == "vignetting_radius" and high - values[name] < 0.01 * span:
-            return True  # a barrel at the largest radius cuts nothing the start did not
     return False
 
 
-def add_feature(aperture: Aperture, feature: str, fits: list[PixelFit], discs: list[Disc]) -> Aperture:
-    """``aperture`` with ``feature`` switched on at a start from which the fit can move.
+def feature_evidence(fits: list[PixelFit], discs: list[Disc]) -> FeatureEvidence:
+    """The numbers a feature's start is built from: the farthest fitted disc's distance from the
+    centre, the squeeze the discs' outlines share (:func:`_squeeze_signal`)."""
+    return FeatureEvidence(max((math.hypot(*f.field_position) for f in fits), default=0.0), _squeeze_signal(discs))
 
-    The vignetting starts as a barrel that just cuts the disc farthest from the centre; the
-    squeeze at the one the discs' outlines share.
+
+def add_feature(aperture: Aperture, feature: str, fits: list[PixelFit], discs: list[Disc]) -> Aperture:
+    """``aperture`` with ``feature`` switched on at a start from which the fit can move (its record's
+    :meth:`~bokehfit.apertures.FeatureSpec.start` from :func:`feature_evidence`): the vignetting as a
+    barrel that just cuts the disc farthest from the centre, the squeeze at the one the discs' outlines share.
     """
-    if feature == "squeeze":
-        return aperture.with_features("squeeze").replace(squeeze=_squeeze_signal(discs) or 1.0)
-    if feature == "vignetting":
-        farthest = max(math.hypot(*f.field_position) for f in fits)
-        shift = VIGNETTING_START_SHIFT
-        return aperture.replace(vignetting_radius=abs(shift) * farthest + VIGNETTING_START_CUT, vignetting_shift=shift)
-    if feature == "rim":
-        return aperture.with_features("rim").replace(rim=0.2)
-    return aperture.with_features(feature)
+    return FEATURE_SPECS[feature].start(aperture, feature_evidence(fits, discs))
 
 
 def _rim_signal(crop: DiscCrop, fit: PixelFit) -> float | None:

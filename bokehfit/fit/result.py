@@ -15,7 +15,8 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 
-from bokehfit.apertures import Aperture
+from bokehfit.apertures import FEATURE_SPECS, Aperture
+from bokehfit.apertures.features import JSON_ORDER
 from bokehfit.discs import Disc
 from bokehfit.errors import InputError, NoResultError
 from bokehfit.fit.chromatic import ChromaticMeasure
@@ -146,8 +147,8 @@ class FailedFit:
         return {"status": self.status, "reason": self.reason, "candidates": []}
 
 
-#: The real-lens features of design.md §3b; those not estimated are reported as null.
-LENS_FEATURES = ("roundness", "squeeze", "vignetting", "rim", "chromatic")
+#: The real-lens features of design.md §3b in the JSON's order (their registry's); those not estimated are null.
+LENS_FEATURES = JSON_ORDER
 #: JSON names of uncertainties that schema 1 named before the ``<name>_uncertainty`` rule (design.md §7, §7b).
 UNCERTAINTY_KEYS = {"angle_deg": "angle_uncertainty_deg", "diameter_px": "diameter_uncertainty_px"}
 #: Blades this round (roundness) give the same answer as the circle: round discs.
@@ -286,30 +287,14 @@ class ApertureFit:
 
         A §3b feature that was fitted has its value; one that was tested and
         not needed its neutral value (roundness 0 for a straight n-gon, rim 0,
-        no vignetting); one that was not estimated None.
+        no vignetting); one that was not estimated None. Which is which, and
+        the value's form, is each feature's record (:class:`~bokehfit.apertures.FeatureSpec`).
         """
         aperture = self.aperture
         angle = aperture.canonical_angle_deg
         sigma = self.feature_uncertainty
-        tested = self.feature_tests
-        roundness = None
-        if aperture.spec.rounds:
-            roundness = Parameter("roundness", aperture.roundness, sigma.get("roundness"))
-        rim = None
-        if "rim" in aperture.enabled_features or "rim" in tested:
-            rim = Parameter("rim", aperture.rim, sigma.get("rim"))
-        vignetting = None
-        if aperture.vignetting is not None:
-            vignetting = Parameter("vignetting", {"radius": aperture.vignetting.radius, "shift": aperture.vignetting.shift},
-                                   {"radius": sigma.get("vignetting_radius"), "shift": sigma.get("vignetting_shift")})
-        squeeze = None
-        if "squeeze" in aperture.enabled_features or "squeeze" in tested:
-            squeeze = Parameter("squeeze", aperture.squeeze, sigma.get("squeeze"))
-        chromatic = None
-        if aperture.chromatic is not None:
-            chromatic = Parameter("chromatic", {"red": aperture.chromatic.red, "blue": aperture.chromatic.blue},
-                                  {"red": sigma.get("chromatic_red"), "blue": sigma.get("chromatic_blue")})
-        features = {"roundness": roundness, "squeeze": squeeze, "rim": rim, "vignetting": vignetting, "chromatic": chromatic}
+        features = {f.name: Parameter(f.name, f.value(aperture), f.uncertainty(sigma))
+                    for f in FEATURE_SPECS.values() if f.is_reported(aperture, self.feature_tests)}
         return {
             "angle_deg": Parameter("angle_deg", angle, self.angle_uncertainty_deg if angle is not None else None),
             "diameter_px": Parameter("diameter_px", self.diameter_px, self.diameter_uncertainty_px),

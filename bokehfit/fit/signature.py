@@ -228,7 +228,7 @@ def screen(outline_xy: np.ndarray, families: tuple[Family, ...], slit_aspect: fl
     for family in families:
         aperture = family.at(aspect=slit_aspect) if slit_aspect is not None else family.aperture
         tries = [aperture]
-        if "roundness" in aperture.parameters:
+        if aperture.has_roundness:
             tries = [aperture.replace(roundness=r) for r in ROUNDNESS_GRID]
         best = None
         for model in tries:

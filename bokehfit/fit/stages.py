@@ -25,12 +25,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bokehfit.apertures import Aperture
+from bokehfit.apertures import FEATURE_SPECS, Aperture
 from bokehfit.discs import Disc
 from bokehfit.fit.agreement import combine, consensus_start, disagreeing, outline_misfits, turned_discs, unsupported
 from bokehfit.fit.choice import choose_discs, slit_aspect
 from bokehfit.fit.families import FAMILIES, Family
-from bokehfit.fit.features import FEATURE_DELTA_BIC, MIN_RIM, add_feature, at_bound, features_to_test
+from bokehfit.fit.features import FEATURE_DELTA_BIC, add_feature, at_bound, features_to_test
 from bokehfit.fit.crop import DiscCrop, crop_disc
 from bokehfit.fit.pixels import JointFit, PixelFit, fit_discs
 from bokehfit.fit.result import CandidateModel, DiscFit, FitOptions
@@ -152,7 +152,7 @@ def screen_discs(luminance: np.ndarray, clipped: np.ndarray | None, discs: list[
 
 def _fit_start(aperture: Aperture) -> Aperture:
     """The pixel fit's start from a screen's aperture: a rounded one a little off its straight bound."""
-    if "roundness" in aperture.parameters:
+    if aperture.has_roundness:
         return aperture.replace(roundness=max(aperture.roundness, 0.05))
     return aperture
 
@@ -282,7 +282,8 @@ def fit_joint(chosen: Chosen, screened: Screened, consensus: Consensus, winner: 
 
 def try_features(joint: Joint, consensus: Consensus, winner: Family) -> Joint:
     """Stage 8: the §3b features the discs ask for, each tried on the joint fit and kept where it
-    gains FEATURE_DELTA_BIC, shows (a rim of at least MIN_RIM) and is not at its bound."""
+    gains FEATURE_DELTA_BIC, shows (its record's least visible value: a rim of at least MIN_RIM) and is
+    not at its bound."""
     ids = joint.ids
     tests = features_to_test([consensus.fits[i] for i in ids], joint.discs, [consensus.screens[i] for i in ids],
                              joint.joint_crops)
@@ -292,7 +293,7 @@ def try_features(joint: Joint, consensus: Consensus, winner: Family) -> Joint:
         start = add_feature(best.fit.aperture, feature, best.fit.fits, joint.discs)
         trial = fit_discs(joint.joint_crops, winner, start, noise=joint.noise, disc_starts=best.disc_starts())
         gains[feature] = best.fit.bic - trial.bic
-        visible = feature != "rim" or abs(trial.aperture.rim) >= MIN_RIM
+        visible = FEATURE_SPECS[feature].shows(trial.aperture)
         if gains[feature] >= FEATURE_DELTA_BIC and visible and not at_bound(trial.aperture, feature):
             best = dataclasses.replace(best, fit=trial)
     return dataclasses.replace(best, tests=tests, gains=gains)
@@ -311,19 +312,23 @@ class Model:
 
 
 def _features_added(joint: Joint, winner: Family) -> list[str]:
-    """The features in the joint fit, and the squeeze where it was tried on a slit (whose own aspect took it)."""
+    """The features in the joint fit, and those tried on a shape whose own aspect took them (a squeeze
+    on a slit: its record's ``taken_by_aspect``)."""
     added = [f for f in joint.gains if f in joint.fit.aperture.enabled_features]
-    if "squeeze" in joint.tests and "aspect" in winner.aperture.parameters and "squeeze" not in added:
-        added.append("squeeze")
+    if winner.aperture.has_aspect:
+        added += [f for f in joint.tests if FEATURE_SPECS[f].taken_by_aspect and f not in added]
     return added
 
 
 def _plain_start(simplest: Family, added: list[str], joint: Joint) -> Aperture:
-    """The simplest model with the features added, at the joint fit's values of them."""
-    start_values = {n: v for n, v in joint.fit.aperture.values.items() if any(n.startswith(f) for f in added)}
+    """The simplest model with the features added, at the joint fit's values of them (a feature the
+    joint fit does not have, from the discs' evidence, as when it was tried)."""
+    specs = [FEATURE_SPECS[f] for f in added]
+    start_values = {n: v for n, v in joint.fit.aperture.values.items() if any(n in s.parameters for s in specs)}
     plain = simplest.aperture.with_features(*added).replace(**start_values)
-    if "squeeze" in added and "squeeze" not in start_values:
-        plain = add_feature(plain, "squeeze", joint.fit.fits, joint.discs)
+    for spec in specs:
+        if not any(n in start_values for n in spec.parameters):
+            plain = add_feature(plain, spec.name, joint.fit.fits, joint.discs)
     return plain
 
 

@@ -339,7 +339,7 @@ def params_for_query(query: dict, scene_name: str = "cornell", masks: MaskStore 
         "label": lens.aperture.label,
         # The shape's own options of `bokehfit render`, from the model's parameters (blades, aspect).
         "shape_flags": (f" --blades {lens.aperture.blades}" if lens.aperture.spec.takes_blades else "")
-        + (f" --aspect {lens.aperture.aspect:g}" if "aspect" in lens.aperture.parameters else ""),
+        + (f" --aspect {lens.aperture.aspect:g}" if lens.aperture.has_aspect else ""),
         "symmetry_deg": lens.aperture.symmetry_deg,
         "canonical_angle_deg": lens.aperture.canonical_angle_deg,
         "coc_px_at_infinity": lens.coc_px(math.inf, settings.width),
