@@ -1,9 +1,10 @@
-"""One aperture model: consumers ask the model, they never compare shape names (issue 11).
+"""One aperture model: consumers ask the model, they never compare shape or feature names (issues 11, 24).
 
 The package's files are read from the installed package (``bokehfit.__file__``).
-Comparisons of shape names belong in ``bokehfit/apertures/`` only; the
-allow-list below names, file by file, what is left elsewhere, each with its
-reason, so that it can only shrink.
+Comparisons of shape names and of the §3b features' names belong in
+``bokehfit/apertures/`` only (the shape registry, the features' records); the
+allow-lists below name, file by file, what is left elsewhere, each with its
+reason, so that they can only shrink.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ import numpy as np
 import pytest
 
 import bokehfit
-from bokehfit.apertures import SHADER_FAMILIES, SHAPES, Aperture, make_aperture
+from bokehfit.apertures import FEATURES, SHADER_FAMILIES, SHAPES, Aperture, make_aperture
 from bokehfit.errors import InputError
 
 PACKAGE = Path(bokehfit.__file__).resolve().parent
@@ -26,21 +27,33 @@ MODEL_FOLDER = "apertures"
 #: Every name a shape goes by: the registry's and the sampler families'.
 SHAPE_NAMES = frozenset(SHAPES) | frozenset(SHADER_FAMILIES) | {"mask"}
 
+#: Every name of a §3b feature (design.md §3b) and of a shape's own parameters: the fit loops over the
+#: features' records (``bokehfit.apertures.FEATURE_SPECS``) and asks the model (``has_aspect``,
+#: ``has_roundness``, ``spec.takes_blades``) instead of comparing these.
+FEATURE_NAMES = frozenset(FEATURES) | {"blades", "aspect", "mask"}
+
 #: (file relative to the package, a regular expression its offending line matches, why it is still there).
 ALLOWED: tuple[tuple[str, str, str], ...] = ()  # (file, line pattern, why): none left
+#: The same for feature-name comparisons.
+FEATURE_ALLOWED: tuple[tuple[str, str, str], ...] = ()  # (file, line pattern, why): none left
 
 _JS_COMPARISON = re.compile(
     r"""(?:===|!==|==|!=)\s*["'](?P<a>[a-z]+)["']|["'](?P<b>[a-z]+)["']\s*(?:===|!==|==|!=)"""
 )
 
 
+def _is_name_of(node: ast.AST, names: frozenset[str]) -> bool:
+    """A string constant among ``names``, or a tuple/list/set holding one."""
+    if isinstance(node, ast.Constant):
+        return isinstance(node.value, str) and node.value in names
+    if isinstance(node, (ast.Tuple, ast.List, ast.Set)):
+        return any(_is_name_of(item, names) for item in node.elts)
+    return False
+
+
 def _is_shape_name(node: ast.AST) -> bool:
     """A string constant naming a shape, or a tuple/list/set holding one."""
-    if isinstance(node, ast.Constant):
-        return isinstance(node.value, str) and node.value in SHAPE_NAMES
-    if isinstance(node, (ast.Tuple, ast.List, ast.Set)):
-        return any(_is_shape_name(item) for item in node.elts)
-    return False
+    return _is_name_of(node, SHAPE_NAMES)
 
 
 def _compares_family(node: ast.AST) -> bool:
@@ -77,6 +90,19 @@ def python_offences(source: str) -> list[int]:
     return sorted(set(lines))
 
 
+def python_feature_offences(source: str) -> list[int]:
+    """Line numbers of feature-name comparisons in Python ``source``: a comparison with a §3b feature's
+    name or a shape parameter's (``feature == "rim"``, ``"aspect" in aperture.parameters``,
+    ``name in ("vignetting", ...)``, ``case "squeeze":``)."""
+    lines = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Compare) and any(_is_name_of(o, FEATURE_NAMES) for o in [node.left, *node.comparators]):
+            lines.append(node.lineno)
+        elif isinstance(node, ast.MatchValue) and _is_name_of(node.value, FEATURE_NAMES):
+            lines.append(node.lineno)
+    return sorted(set(lines))
+
+
 def javascript_offences(source: str) -> list[int]:
     """Line numbers of JavaScript comparisons with a shape's name (``=== "ngon"``)."""
     found = []
@@ -88,22 +114,35 @@ def javascript_offences(source: str) -> list[int]:
     return found
 
 
-def package_offences() -> list[tuple[str, int, str]]:
-    """(file, line number, line) of every shape-name comparison outside the model's folder."""
+def javascript_feature_offences(source: str) -> list[int]:
+    """Line numbers of JavaScript comparisons with a feature's name (``=== "rim"``)."""
+    return [n for n, line in enumerate(source.splitlines(), 1)
+            if any((m.group("a") or m.group("b")) in FEATURE_NAMES for m in _JS_COMPARISON.finditer(line))]
+
+
+def package_offences(python=python_offences, javascript=javascript_offences) -> list[tuple[str, int, str]]:
+    """(file, line number, line) of every comparison the scans find outside the model's folder
+    (shape names by default; ``javascript`` None: Python files only)."""
     found = []
     for path in sorted(PACKAGE.rglob("*")):
         relative = path.relative_to(PACKAGE).as_posix()
         if relative.split("/")[0] == MODEL_FOLDER or path.suffix not in (".py", ".js"):
             continue
+        scan = python if path.suffix == ".py" else javascript
+        if scan is None:
+            continue
         source = path.read_text(encoding="utf-8")
-        numbers = python_offences(source) if path.suffix == ".py" else javascript_offences(source)
         lines = source.splitlines()
-        found.extend((relative, n, lines[n - 1].strip()) for n in numbers)
+        found.extend((relative, n, lines[n - 1].strip()) for n in scan(source))
     return found
 
 
-def _allowed(relative: str, line: str) -> bool:
-    return any(relative == file and re.search(pattern, line) for file, pattern, _ in ALLOWED)
+def _feature_offences() -> list[tuple[str, int, str]]:
+    return package_offences(python_feature_offences, javascript_feature_offences)
+
+
+def _allowed(relative: str, line: str, allowed=ALLOWED) -> bool:
+    return any(relative == file and re.search(pattern, line) for file, pattern, _ in allowed)
 
 
 def test_no_shape_name_comparisons_outside_the_model():
@@ -113,12 +152,21 @@ def test_no_shape_name_comparisons_outside_the_model():
     )
 
 
-def test_allow_list_has_no_stale_entries():
+def test_no_feature_name_comparisons_outside_the_model():
+    offences = [f"{file}:{n}: {line}" for file, n, line in _feature_offences()
+                if not _allowed(file, line, FEATURE_ALLOWED)]
+    assert not offences, ("feature names compared outside bokehfit/apertures (loop over FEATURE_SPECS, or ask the "
+                          "Aperture):\n" + "\n".join(offences))
+
+
+@pytest.mark.parametrize("allowed, scan", [(ALLOWED, package_offences), (FEATURE_ALLOWED, _feature_offences)],
+                         ids=["shapes", "features"])
+def test_allow_list_has_no_stale_entries(allowed, scan):
     """Each allowed comparison is still there; remove the entry once its file asks the model."""
-    found = package_offences()
+    found = scan()
     stale = [
         f"{file}: {pattern} ({why})"
-        for file, pattern, why in ALLOWED
+        for file, pattern, why in allowed
         if not any(f == file and re.search(pattern, line) for f, _, line in found)
     ]
     assert not stale, "allow-list entries that match nothing any more:\n" + "\n".join(stale)
@@ -142,9 +190,31 @@ def test_the_scan_finds_name_comparisons_and_nothing_else(source, expected):
     assert python_offences(source) == expected
 
 
+@pytest.mark.parametrize(
+    "source, expected",
+    [
+        ('if feature == "squeeze":\n    pass\n', [1]),
+        ('visible = feature != "rim" or abs(rim) >= 0.05\n', [1]),
+        ('aspect = 0.3 if "aspect" in aperture.parameters else None\n', [1]),
+        ('on = name not in ("vignetting", "chromatic")\n', [1]),
+        ('x = 1\nmatch feature:\n    case "roundness":\n        pass\n', [3]),
+        ('if "blades" in given:\n    pass\n', [1]),
+        ("start = aperture.replace(rim=0.2)\n", []),  # a keyword, not a name compared
+        ('spec = FEATURE_SPECS["rim"]\n', []),  # a lookup in the registry
+        ('tried = ["rim", "squeeze"]\n', []),  # named, not compared
+        ('if name == "angle_deg":\n    pass\n', []),  # not a feature
+        ("if aperture.has_aspect:\n    pass\n", []),
+    ],
+)
+def test_the_feature_scan_finds_name_comparisons_and_nothing_else(source, expected):
+    assert python_feature_offences(source) == expected
+
+
 def test_the_javascript_scan():
     source = 'const a = l.shape === "ngon" ? 1 : 2;\nconst b = mode === "exact";\nif ("slit" !== s) {}\n'
     assert javascript_offences(source) == [1, 3]
+    features = 'if (name === "rim") {}\nconst r = p.rim;\nconst c = "chromatic" != k;\n'
+    assert javascript_feature_offences(features) == [1, 3]
 
 
 # --- what the consumers ask the model ---------------------------------------------
