@@ -15,6 +15,7 @@ from bokehfit.discs import measure_discs_at
 from bokehfit.discs.measure import measure_candidate
 from bokehfit.discs.places import MIN_NOISE
 from bokehfit.discs.rays import measure_rays, pixel_noise
+from bokehfit.discs.reasons import NoDisc
 
 SUPERSAMPLE = 4
 
@@ -82,9 +83,9 @@ def test_a_faint_large_disc_among_brighter_neighbours_is_measured_by_its_edge():
     discs = [(_circle(centre, diameter), 0.02), (_circle((120, 130), 150), 0.3), (_circle((400, 330), 170), 0.25)]
     image = _photo(shape, discs, _haze(shape), noise=0.003)
     contour = measure_candidate(image, None, centre, diameter, diameter / 2, MIN_NOISE, 8.0)
-    assert isinstance(contour, str) or contour.reason is not None or abs(contour.diameter_px / diameter - 1) > 0.1
+    assert isinstance(contour, NoDisc) or contour.reason is not None or abs(contour.diameter_px / diameter - 1) > 0.1
     m = measure_rays(image, None, centre, diameter, MIN_NOISE, 8.0)
-    assert not isinstance(m, str), m
+    assert not isinstance(m, NoDisc), m
     assert m.reason is None, m.reason
     assert m.diameter_px == pytest.approx(diameter, rel=0.03)
     assert math.dist(m.center_xy, centre) < 2.0
@@ -115,7 +116,7 @@ def test_a_dark_branch_across_a_disc_is_not_its_edge():
     bar = _indicator(shape, lambda x, y: np.abs((x - 150) * 0.8 + (y - 150) * 0.6 - 55) <= 6)
     image = (image * (1 - 0.9 * ndimage.gaussian_filter(bar, 1.0))).astype(np.float32)
     m = measure_rays(image, None, centre, diameter, MIN_NOISE, 8.0)
-    assert not isinstance(m, str), m
+    assert not isinstance(m, NoDisc), m
     assert m.diameter_px == pytest.approx(diameter, rel=0.04)
     reliable = m.outline_reliable
     assert 0.6 < reliable.mean() < 0.97
@@ -129,7 +130,7 @@ def test_a_hexagons_outline_follows_its_blades():
     inside = _hexagon((130.0, 130.0), 80.0)
     image = _photo(shape, [(inside, 0.08)], _haze(shape, 0.3, 0.4), noise=0.004)
     m = measure_rays(image, None, (128.0, 133.0), 140.0, MIN_NOISE, 8.0)
-    assert not isinstance(m, str) and m.reason is None, m
+    assert not isinstance(m, NoDisc) and m.reason is None, m
     truth = _indicator(shape, inside) > 0.5
     import cv2
     drawn = np.zeros(shape, np.uint8)
@@ -149,13 +150,13 @@ def test_a_glow_without_a_step_is_no_disc(kind):
     image = (0.1 + 0.3 * glow + np.random.default_rng(1).normal(0, 0.003, shape)).astype(np.float32)
     for diameter in (80.0, 100.0, 140.0):
         m = measure_rays(image, None, (150.0, 150.0), diameter, MIN_NOISE, 8.0)
-        assert isinstance(m, str) or m.reason is not None, (diameter, m.diameter_px, m.edge_width_px)
+        assert isinstance(m, NoDisc) or m.reason is not None, (diameter, m.diameter_px, m.edge_width_px)
 
 
 def test_noise_alone_has_no_outline():
     image = (0.3 + np.random.default_rng(2).normal(0, 0.01, (200, 200))).astype(np.float32)
     m = measure_rays(image, None, (100.0, 100.0), 80.0, MIN_NOISE, 8.0)
-    assert isinstance(m, str) or m.reason is not None
+    assert isinstance(m, NoDisc) or m.reason is not None
 
 
 def test_a_disc_cut_by_the_frame_is_seen_where_the_frame_does_not_cut_it():
@@ -163,7 +164,7 @@ def test_a_disc_cut_by_the_frame_is_seen_where_the_frame_does_not_cut_it():
     centre, diameter = (40.0, 100.0), 120.0  # a third of it beyond the left edge
     image = _photo(shape, [(_circle(centre, diameter), 0.2)], np.full(shape, 0.1, np.float32))
     m = measure_rays(image, None, centre, diameter, MIN_NOISE, 8.0)
-    assert not isinstance(m, str), m
+    assert not isinstance(m, NoDisc), m
     assert m.clipped  # cut by the frame
     seen = m.outline_xy[m.outline_reliable]
     assert seen[:, 0].min() > 0.5

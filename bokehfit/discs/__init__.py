@@ -21,7 +21,7 @@ outline that is its own and reliable, and ``outline_reliable`` per outline
 point. Discs whose outlines overlap share a ``cluster`` id; the part of each
 outline that runs inside another disc is not its own. Every measured candidate
 that was not kept is listed in ``rejections`` with the reason
-(``rejected_because``), and counted in ``rejected``.
+(``rejected_because``, the words of a :class:`Reason`), and counted in ``rejected``.
 
 The package is in rooms of one job: :mod:`bokehfit.discs.search` (:func:`find_discs` in named
 steps, its limits), :mod:`bokehfit.discs.places` (:func:`measure_discs_at`, a person's places, and
@@ -44,6 +44,7 @@ from bokehfit.discs.disc import (
     Rejection,
 )
 from bokehfit.discs.places import measure_discs_at
+from bokehfit.discs.reasons import Reason
 from bokehfit.discs.search import (
     COMPARE_MIN_DIAMETER_PX,
     DEFAULT_MAX_DIAMETER_PX,
@@ -58,6 +59,7 @@ __all__ = [
     "Disc",
     "DiscSearch",
     "Rejection",
+    "Reason",
     "find_discs",
     "measure_discs_at",
     "DEFAULT_MIN_DIAMETER_PX",

@@ -20,6 +20,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from bokehfit.discs.measure import RESOLVABLE_PX, Measurement
+from bokehfit.discs.reasons import NoDisc, Reason
 from bokehfit.errors import InputError, check_finite
 
 #: Two measurements are of one disc when their centres lie within this share of the diameter and
@@ -121,11 +122,18 @@ class Disc:
 
 @dataclass(frozen=True)
 class Rejection:
-    """A measured candidate that is not a disc, and why."""
+    """A measured candidate that is not a disc, and why: ``rejected_because`` is the reason in words
+    (a :class:`~bokehfit.discs.reasons.Reason`'s, or a :class:`~bokehfit.discs.reasons.NoDisc`'s
+    detail with its numbers)."""
 
     center_xy: tuple[float, float]
     diameter_px: float
     rejected_because: str
+
+    @classmethod
+    def of(cls, center_xy: tuple[float, float], diameter_px: float, why: NoDisc | Reason) -> Rejection:
+        """The rejection at ``center_xy`` of a candidate of ``diameter_px``, for ``why``."""
+        return cls(center_xy, diameter_px, str(why))
 
     def to_json(self) -> dict:
         return {
@@ -141,6 +149,7 @@ class DiscSearch:
 
     discs: list[Disc]
     candidates: int
+    #: How many candidates were not kept, by the reason in words (a :class:`Rejection`'s ``rejected_because``).
     rejected: Counter = field(default_factory=Counter)
     time_s: float = 0.0
     #: One line each, for people: limits reached (``"30976 candidates found, the 2000 clearest measured"``).

@@ -40,6 +40,7 @@ from bokehfit.discs.contours import _edge_gradient, _open_in_window, _outline, p
 from bokehfit.discs.gaps import OCCLUSION_BRIDGE_REL, OCCLUSION_MIN_SHARE
 from bokehfit.discs.levels import MIN_SNR, Window, _annulus_levels, _levelled, _percentile
 from bokehfit.discs.outlines import RING_CORE_REL, Outlined, _closed_outline, _two_passes
+from bokehfit.discs.reasons import NoDisc, Reason
 from bokehfit.discs.verdict import MAX_ELONGATION, MIN_SOLIDITY, MIN_THICKNESS_REL, RING_DIP, Measurement, describe
 
 __all__ = [
@@ -98,9 +99,9 @@ def measure_candidate(
     min_noise: float,
     min_diameter_px: float,
     cluster: bool = False,
-) -> Measurement | str:
+) -> Measurement | NoDisc:
     """Measure the disc around ``center_xy`` of about ``diameter_px``, reaching about
-    ``extent_px`` from its centre; a rejection reason where there is no disc to measure.
+    ``extent_px`` from its centre; a :class:`NoDisc` where there is no disc to measure.
 
     Two passes: the first uses the candidate's size for the levels, the second
     the size it measured. A hollow candidate that fails as a plateau disc is
@@ -112,28 +113,30 @@ def measure_candidate(
     radius = max(1.0, 0.5 * diameter_px)
     if cluster:
         found = _closed_outline(luminance, center_xy, radius, 1.3 * max(radius, extent_px) + 2.0, 0.8, CLUSTER_PLATEAU_PERCENTILE)
-        return found if isinstance(found, str) else describe(luminance, clipped_mask, found, min_noise, min_diameter_px)
+        if isinstance(found, NoDisc):
+            return found
+        return describe(luminance, clipped_mask, found, min_noise, min_diameter_px)
     levelled: dict = {}
     found = _two_passes(luminance, center_xy, radius, max(radius, extent_px), 0.8, levelled=levelled)
     hollow = extent_px > RING_REACH * radius and extent_px >= RESOLVABLE_PX  # a ring shows as one from 16 px
-    if isinstance(found, str) and found in ("faint", "no outline") and hollow:
+    if isinstance(found, NoDisc) and found.reason in (Reason.FAINT, Reason.NO_OUTLINE) and hollow:
         # A ring's half-peak region is its rim: take its reach as the radius, the rim as the plateau.
         for percentile in RING_PLATEAU_PERCENTILES:
             ring = _two_passes(luminance, center_xy, extent_px, extent_px, RING_CORE_REL, percentile, levelled)
-            if not isinstance(ring, str):
+            if not isinstance(ring, NoDisc):
                 found = ring
                 break
-    if isinstance(found, str):
+    if isinstance(found, NoDisc):
         return found
     measured = describe(luminance, clipped_mask, found, min_noise, min_diameter_px)
-    if measured.reason == "soft edge":
+    if measured.reason is Reason.SOFT_EDGE:
         step = _step_share(found)
         if step is not None:  # a bright centre: measured again with the top of its edge as the plateau
             outline = found.outline
             _, cx, cy = polygon_area_centroid(outline)
             reach = float(np.max(np.hypot(outline[:, 0] - cx, outline[:, 1] - cy)))
             again = _two_passes(luminance, (cx + found.window.c0, cy + found.window.r0), reach, reach, 0.8, 90, levelled, 2.0 * step)
-            if not isinstance(again, str):
+            if not isinstance(again, NoDisc):
                 stepped = describe(luminance, clipped_mask, again, min_noise, min_diameter_px)
                 if stepped.reason is None and stepped.diameter_px > measured.diameter_px:
                     return replace(stepped, bright_centre=True)

@@ -11,7 +11,8 @@ neighbouring light (discs that touch, a bright region), the disc is cut out by
 a circle of 1.3 r + 2 px and flagged ``overlaps``. Thin occluders and a ring's
 broken rim are closed first (:mod:`bokehfit.discs.gaps`).
 
-Where no outline is drawn, the reason (the rest are :mod:`bokehfit.discs.verdict`'s):
+Where no outline is drawn, the reason (a :class:`bokehfit.discs.reasons.NoDisc`; the rest are
+:mod:`bokehfit.discs.verdict`'s):
 
 ``no surround``     no background around it in the frame (it fills the frame);
 ``faint``           the plateau does not stand out of the surround (the test of
@@ -33,6 +34,7 @@ from bokehfit.discs.candidates import LARGE_DISC_PX
 from bokehfit.discs.contours import _open_in_window, _outline, polygon_area_centroid
 from bokehfit.discs.gaps import _bridge_occluders, _close_ring, _ring_arc
 from bokehfit.discs.levels import Levels, Window, _annulus_levels, _contrast_ok, _levelled, _percentile
+from bokehfit.discs.reasons import NoDisc, Reason
 
 __all__ = ["Outlined"]
 
@@ -74,7 +76,7 @@ def _closed_outline(luminance, center_xy, radius, reach, core_rel=0.8, percentil
     """Levels and the closed 50 % outline around ``center_xy``, growing the window
     while the outline runs into it; the last window masks beyond ``reach`` instead
     (the disc then touches a neighbour). The plateau is the ``percentile`` within
-    ``core_rel`` · r. Returns the :class:`Outlined`, or why there is none. ``levelled`` keeps the
+    ``core_rel`` · r. Returns the :class:`Outlined`, or why there is none (a :class:`NoDisc`). ``levelled`` keeps the
     :class:`Surround` of each window (a dict kept by the caller for one candidate)."""
     height, width = luminance.shape
     levelled = {} if levelled is None else levelled
@@ -88,7 +90,7 @@ def _closed_outline(luminance, center_xy, radius, reach, core_rel=0.8, percentil
         if key not in levelled:  # the ring mode's second plateau percentile has the same window
             levelled[key] = _annulus_levels(crop, distance, radius)
         if levelled[key] is None:
-            return "no surround"
+            return NoDisc(Reason.NO_SURROUND)
         surround = levelled[key]
         plane, background, noise, ring_lift = surround.plane, surround.background, surround.noise, surround.lift
         core = _levelled(crop, distance <= max(core_rel * radius, 0.75), plane)
@@ -96,7 +98,7 @@ def _closed_outline(luminance, center_xy, radius, reach, core_rel=0.8, percentil
         plateau = background + edge_rel * (plateau - background)  # a bright centre's: the top of its edge
         level = background + 0.5 * (plateau - background)
         if not _contrast_ok(plateau - background, noise, background, 2.0 * radius):
-            return "faint"
+            return NoDisc(Reason.FAINT)
         if plane is not None:
             crop = crop - plane.over(crop.shape)
         seed_rc = (center_xy[1] - window.r0, center_xy[0] - window.c0)
@@ -110,7 +112,7 @@ def _closed_outline(luminance, center_xy, radius, reach, core_rel=0.8, percentil
             if arc is not None:  # a rim that breaks: its arcs, and the circle through them
                 return Outlined(window, crop, Levels(background, plateau, noise, ring_lift), arc.points, False, None, ~arc.seen)
         if outline is None:
-            return "no outline"
+            return NoDisc(Reason.NO_OUTLINE)
         if not _open_in_window(outline, crop.shape, window, (height, width)):
             levels = Levels(background, plateau, noise, ring_lift)
             return Outlined(window, crop, levels, outline, False, raised.pixels, np.zeros(len(outline), dtype=bool))
@@ -119,10 +121,10 @@ def _closed_outline(luminance, center_xy, radius, reach, core_rel=0.8, percentil
     masked = np.where(distance <= reach, crop, min(background, level - 1e-6)).astype(np.float32)
     outline = _outline(masked, level, background, seed_rc)
     if outline is None:
-        return "no outline"
+        return NoDisc(Reason.NO_OUTLINE)
     on_cut = np.abs(np.hypot(outline[:, 0] - seed_rc[1], outline[:, 1] - seed_rc[0]) - reach) < 1.0
     if on_cut.mean() > MAX_CUT_SHARE:  # mostly the cutting circle: a piece of something larger
-        return "part of a larger region"
+        return NoDisc(Reason.PART_OF_LARGER_REGION)
     return Outlined(window, crop, Levels(background, plateau, noise, ring_lift), outline, True, None, on_cut)
 
 
@@ -145,7 +147,7 @@ def _two_passes(luminance, center_xy, radius, reach, core_rel, percentile=90, le
     found = None
     for _ in range(2):
         found = _closed_outline(luminance, center_xy, radius, 1.3 * reach + 2.0, core_rel, percentile, levelled, edge_rel)
-        if isinstance(found, str):
+        if isinstance(found, NoDisc):
             return found
         outline = found.outline
         area, cx, cy = polygon_area_centroid(outline)

@@ -33,6 +33,7 @@ from bokehfit.discs.disc import (
 )
 from bokehfit.discs.measure import RESOLVABLE_PX, Measurement, measure_candidate, split_cluster
 from bokehfit.discs.rays import measure_rays
+from bokehfit.discs.reasons import NoDisc, Reason
 
 #: Noise floor of the local noise estimate (linear units).
 MIN_NOISE = 1e-4
@@ -69,9 +70,10 @@ def measure_discs_at(
     measurements: list[Measurement] = []
     for xy, diameter in places:
         m = _measure_place(luminance, clipped, xy, diameter)
-        if isinstance(m, str):
-            rejected[m] += 1
-            rejections.append(Rejection(xy, diameter, m))
+        if isinstance(m, NoDisc):
+            rejection = Rejection.of(xy, diameter, m)
+            rejected[rejection.rejected_because] += 1
+            rejections.append(rejection)
         else:
             measurements.append(replace(m, reason=None))
     measurements = [replace(m, reason=None) for m in _by_own_steps(luminance, clipped, measurements, 1.0)]
@@ -79,32 +81,32 @@ def measure_discs_at(
 
 
 def _measure_place(luminance, clipped, xy, diameter: float, min_diameter_px: float = 1.0,
-                   rays_after: tuple[str, ...] | None = None) -> Measurement | str:
+                   rays_after: tuple[Reason, ...] | None = None) -> Measurement | NoDisc:
     """The disc at a place and about a size (a person's pick, a circle through an edge): measured as a
-    candidate there; where it overlaps others, the part of its cluster closest to the place. A reason
-    where no outline of about that size can be drawn there. The measurement's own ``reason`` (its
+    candidate there; where it overlaps others, the part of its cluster closest to the place. A
+    :class:`NoDisc` where no outline of about that size can be drawn there. The measurement's own ``reason`` (its
     tests of a disc) is left for the caller to weigh."""
     height, width = luminance.shape
     if not (0 <= xy[0] < width and 0 <= xy[1] < height):
-        return "outside the photo"
+        return NoDisc(Reason.OUTSIDE_PHOTO)
     m = _contour_at_place(luminance, clipped, xy, diameter, min_diameter_px)
     return _by_rays_after(luminance, clipped, m, xy, diameter, min_diameter_px, rays_after)
 
 
-def _by_rays_after(luminance, clipped, m: Measurement | str, xy, diameter: float, min_diameter_px: float,
-                   rays_after: tuple[str, ...] | None) -> Measurement | str:
+def _by_rays_after(luminance, clipped, m: Measurement | NoDisc, xy, diameter: float, min_diameter_px: float,
+                   rays_after: tuple[Reason, ...] | None) -> Measurement | NoDisc:
     """The contour's measurement ``m`` at a place, or, where it finds no disc there for one of the reasons
     ``rays_after`` (any reason: None), the disc measured there by its own step along rays, where that
     finds a disc of about ``diameter`` at the place (a measurement that draws an outline, over a reason)."""
     if isinstance(m, Measurement) and m.reason is None:
         return m
-    if rays_after is not None and (m if isinstance(m, str) else m.reason) not in rays_after:
+    if rays_after is not None and m.reason not in rays_after:
         return m
     # Where one level does not outline it (a faint disc over haze and its neighbours' light, discs
     # that overlap, a bright centre), the disc's own edge along rays from the place may.
     stepped = measure_rays(luminance, clipped, xy, diameter, MIN_NOISE, min_diameter_px)
     if isinstance(stepped, Measurement) and _near_place(stepped, xy, diameter) and \
-            (stepped.reason is None or isinstance(m, str)):
+            (stepped.reason is None or isinstance(m, NoDisc)):
         return stepped
     return m
 
@@ -116,18 +118,19 @@ def _near_place(m: Measurement, xy, diameter: float) -> bool:
         math.hypot(m.center_xy[0] - xy[0], m.center_xy[1] - xy[1]) <= 0.5 * diameter
 
 
-def _contour_at_place(luminance, clipped, xy, diameter: float, min_diameter_px: float) -> Measurement | str:
+def _contour_at_place(luminance, clipped, xy, diameter: float, min_diameter_px: float) -> Measurement | NoDisc:
     """The contour measurement at a place (:func:`bokehfit.discs.measure.measure_candidate`), the part
-    of its cluster closest to the place, or a reason."""
+    of its cluster closest to the place, or why there is none."""
     m = measure_candidate(luminance, clipped, xy, diameter, 0.5 * diameter, MIN_NOISE, min_diameter_px)
-    if isinstance(m, str):
+    if isinstance(m, NoDisc):
         return m
     parts = [m] + (split_cluster(m) if m.overlaps and m.diameter_px >= 2.0 * RESOLVABLE_PX else [])
     m = min(parts, key=lambda p: math.hypot(p.center_xy[0] - xy[0], p.center_xy[1] - xy[1]) / diameter
             + abs(math.log(p.diameter_px / diameter)))
     if not _near_place(m, xy, diameter):
-        return (f"the outline measured there ({m.diameter_px:.0f} px at {m.center_xy[0]:.0f},"
-                f" {m.center_xy[1]:.0f}) is not a disc of about {diameter:.0f} px")
+        return NoDisc(Reason.NOT_THE_DISC_ASKED,
+                      f"the outline measured there ({m.diameter_px:.0f} px at {m.center_xy[0]:.0f},"
+                      f" {m.center_xy[1]:.0f}) is not a disc of about {diameter:.0f} px")
     return m
 
 

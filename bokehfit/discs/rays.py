@@ -50,6 +50,7 @@ from scipy import ndimage
 from bokehfit.discs.contours import polygon_area_centroid
 from bokehfit.discs.levels import Levels, Window
 from bokehfit.discs.outlines import Outlined
+from bokehfit.discs.reasons import NoDisc, Reason
 from bokehfit.discs.verdict import Measurement, describe
 
 __all__ = ["measure_rays", "pixel_noise", "RAYS", "MIN_STEP_SIGMA", "MIN_SEEN"]
@@ -232,8 +233,8 @@ def _fill(angles: np.ndarray, edge: np.ndarray, on: np.ndarray) -> np.ndarray:
     return np.where(on, edge, np.interp(angles, turn, np.tile(edge[order], 3)))
 
 
-def _trace(crop, centre_rc, radius, noise):
-    """One pass: the outline (x, y in the crop) with its seen rays, and the levels; or a reason."""
+def _trace(crop, centre_rc, radius, noise) -> tuple[np.ndarray, np.ndarray, Levels] | NoDisc:
+    """One pass: the outline (x, y in the crop) with its seen rays, and the levels; or why there is none."""
     rays = _Rays(crop, centre_rc, radius, noise)
     strength = np.maximum(-rays.slope, 0.0)
     strength = ndimage.gaussian_filter1d(strength, 1.0, axis=0, mode="wrap")
@@ -249,7 +250,7 @@ def _trace(crop, centre_rc, radius, noise):
     sigma = np.array([rays.sigma(j) for j in path])
     positive = framed & (steps > MIN_STEP_SIGMA * sigma)
     if positive.mean() < MIN_SEEN:
-        return "faint"
+        return NoDisc(Reason.FAINT)
     typical = float(np.median(steps[positive]))
 
     def shows_edge(step, outside, farther, sigma_k) -> bool:
@@ -267,7 +268,7 @@ def _trace(crop, centre_rc, radius, noise):
             if where is not None:
                 edge[k], seen[k] = where, True
     if seen.mean() < MIN_SEEN:
-        return "no outline"
+        return NoDisc(Reason.NO_OUTLINE)
     curve, on, tolerance = _smooth_curve(rays.angles, edge, seen, radius)
     # Rays off the curve (a neighbour's edge, an occluder's) or not seen: the disc's edge is looked for
     # again near the curve, where the path did not go.
@@ -284,7 +285,7 @@ def _trace(crop, centre_rc, radius, noise):
             if where is not None and abs(where - curve[k]) <= near * rays.step:
                 edge[k], on[k], outer[k] = where, True, outside_k
     if on.mean() < MIN_SEEN:
-        return "no outline"
+        return NoDisc(Reason.NO_OUTLINE)
     # A step, not a ramp or a glow: the light falls across the edge within a share of the distance
     # between the step's two sides, and inside it is a plateau or a rim, not a rise to a peak.
     at = np.clip(np.round(edge / rays.step).astype(int), 1, len(rays.radii) - 2)
@@ -296,7 +297,7 @@ def _trace(crop, centre_rc, radius, noise):
         falls.append(step_k / max(-steepest, 1e-12))
         rises.append((float(np.median(rays.profile[k, : max(1, int(RISE_CORE * at[k]))])) - near_inside) / step_k)
     if float(np.median(falls)) > MAX_RAMP_SHARE * (2 * rays.gap + rays.side) * rays.step or float(np.median(rises)) > MAX_RISE:
-        return "soft edge"
+        return NoDisc(Reason.SOFT_EDGE)
     edge = _fill(rays.angles, edge, on)
     outline = np.column_stack([centre_rc[1] + edge * np.cos(rays.angles), centre_rc[0] + edge * np.sin(rays.angles)])
     background = float(np.median(outer[on]))
@@ -314,9 +315,9 @@ def measure_rays(
     diameter_px: float,
     min_noise: float,
     min_diameter_px: float,
-) -> Measurement | str:
+) -> Measurement | NoDisc:
     """Measure the disc of about ``diameter_px`` around ``center_xy`` by the step of its edge along
-    rays (the module's Notes); a reason where no outline of a disc is there.
+    rays (the module's Notes); a :class:`~bokehfit.discs.reasons.NoDisc` where no outline of a disc is there.
 
     Two passes: the second from the first's centre and size. The outline points of rays that do not
     show the disc's own edge are marked not seen (``outline_reliable``); the measurement's tests of a
@@ -331,19 +332,19 @@ def measure_rays(
         r0, c0 = max(0, int(math.floor(row - margin))), max(0, int(math.floor(col - margin)))
         r1, c1 = min(height, int(math.ceil(row + margin)) + 1), min(width, int(math.ceil(col + margin)) + 1)
         if r1 - r0 < 3 or c1 - c0 < 3 or not (0 <= col < width and 0 <= row < height):
-            return "outside the photo"
+            return NoDisc(Reason.OUTSIDE_PHOTO)
         raw = luminance[r0:r1, c0:c1]
         noise = max(pixel_noise(raw), min_noise)
         smooth = float(np.clip(SMOOTH_REL * radius, *SMOOTH_PX))
         crop = cv2.GaussianBlur(np.ascontiguousarray(raw, np.float32), (0, 0), smooth, borderType=cv2.BORDER_REPLICATE)
         traced = _trace(crop, (row - r0, col - c0), radius, noise)
-        if isinstance(traced, str):
+        if isinstance(traced, NoDisc):
             return traced
         outline, seen, levels = traced
         found = Outlined(Window(r0, c0, r1, c1), crop, levels, outline, False, None, ~seen)
         area, cx, cy = polygon_area_centroid(outline)
         if area <= 0:
-            return "no outline"
+            return NoDisc(Reason.NO_OUTLINE)
         if math.hypot(cx + c0 - col, cy + r0 - row) > 0.5 * radius:
             break  # the outline is not around the place: the first pass's is judged
         center_xy, radius = (cx + c0, cy + r0), max(1.0, math.sqrt(area / math.pi))

@@ -39,6 +39,7 @@ from bokehfit.discs.disc import (
 )
 from bokehfit.discs.measure import RESOLVABLE_PX, Measurement, measure_candidate, split_cluster
 from bokehfit.discs.places import MIN_NOISE, _by_own_steps, _by_rays_after, _measure_place
+from bokehfit.discs.reasons import NoDisc, Reason
 
 #: Smallest disc the detector seeks by default (``bokehfit discs``): glints from 4 px are counted.
 DEFAULT_MIN_DIAMETER_PX = 4.0
@@ -61,7 +62,7 @@ MAX_CLUSTER_CANDIDATES = MAX_CANDIDATES // 20
 #: rays only where the contour found too little contrast there: where the contour finds no outline or a
 #: soft one, the rays' closed path in a photo's own search took merged glows and lit texture for discs
 #: (the reference photos' labels: 5 of 8 such discs used by the fit were not discs).
-RAYS_AFTER = ("faint",)
+RAYS_AFTER = (Reason.FAINT,)
 #: ... and from this size (px): the step's sides are then 5 px or more (under 64 px, at their 3-px floor,
 #: JPEG's 8-px blocks and texture make steps as clear as a small faint disc's).
 RAYS_MIN_DIAMETER_PX = 64.0
@@ -71,7 +72,7 @@ RAYS_MIN_DIAMETER_PX = 64.0
 #: follows. Not where the contour draws no outline: there the rays' closed path took broad glows for
 #: discs (the reference photos' labels: two glows of 350 px used by the fit, one photo's answer wrong).
 #: Unlike a circle through edges, a blob is light standing out of its surround, so its step is sought from ...
-BLOB_RAYS_AFTER = ("faint", "soft edge")
+BLOB_RAYS_AFTER = (Reason.FAINT, Reason.SOFT_EDGE)
 #: ... this size (px): the step's sides (3 px, beginning 1.5 px from the edge) then lie inside the disc.
 BLOB_RAYS_MIN_DIAMETER_PX = 2.0 * RESOLVABLE_PX
 #: Most circles through edges measured per photo (module bokehfit.discs.circles; the clearest first).
@@ -146,7 +147,7 @@ def _within_cluster_limit(candidates: list[Candidate], rejected: Counter, notes:
     if len(clusters) > MAX_CLUSTER_CANDIDATES:
         dropped = {id(c) for c in clusters[MAX_CLUSTER_CANDIDATES:]}  # clearest first, as _distinct sorts them
         candidates = [c for c in candidates if id(c) not in dropped]
-        rejected["beyond the cluster limit"] = len(dropped)
+        rejected[str(Reason.BEYOND_CLUSTER_LIMIT)] = len(dropped)
         notes.append(
             f"{len(clusters)} possible clusters of overlapping discs, the {MAX_CLUSTER_CANDIDATES} clearest split"
             " (limit MAX_CLUSTER_CANDIDATES)"
@@ -158,7 +159,7 @@ def _within_candidate_limit(candidates: list[Candidate], rejected: Counter, note
     """The MAX_CANDIDATES candidates measured of more: up to MAX_LARGE_CANDIDATES large ones, then the
     clearest."""
     found = len(candidates)
-    rejected["beyond the candidate limit"] = found - MAX_CANDIDATES
+    rejected[str(Reason.BEYOND_CANDIDATE_LIMIT)] = found - MAX_CANDIDATES
     # _distinct sorts them clearest first; the large ones go first, up to their quota, then
     # those large enough to show their shape (RESOLVABLE_PX), then the smaller ones.
     large = [c for c in candidates if c.diameter_px >= LARGE_DISC_PX][:MAX_LARGE_CANDIDATES]
@@ -220,7 +221,7 @@ def _measure_candidates(luminance, clipped, candidates: list[Candidate], min_dia
     measurements: list[Measurement] = []
     for candidate in iterator:
         if grid.contains(candidate.center_xy):
-            measured = Rejection(candidate.center_xy, candidate.diameter_px, "inside a larger disc")
+            measured = Rejection.of(candidate.center_xy, candidate.diameter_px, Reason.INSIDE_LARGER_DISC)
         elif candidate.cluster:
             measured = _measure_cluster(luminance, clipped, candidate, min_diameter_px, max_diameter_px)
         else:
@@ -262,15 +263,15 @@ class _OutlineGrid:
 def _measure_cluster(luminance, clipped, candidate: Candidate, min_diameter_px: float,
                      max_diameter_px: float) -> _Measured | Rejection:
     """A cluster candidate measured as a whole and split into its discs of the sizes sought; a
-    rejection ("not a cluster") where it has none."""
+    rejection (``Reason.NOT_A_CLUSTER``) where it has none."""
     m = measure_candidate(luminance, clipped, candidate.center_xy, candidate.diameter_px, candidate.extent_px,
                           MIN_NOISE, min_diameter_px, cluster=True)
-    parts = [] if isinstance(m, str) else split_cluster(m)
+    parts = [] if isinstance(m, NoDisc) else split_cluster(m)
     parts = [p for p in parts if min_diameter_px <= p.diameter_px <= max_diameter_px]
     if parts:
         return _Measured(m.outline_xy, parts)
     # One disc with its glow: its own candidate measures it.
-    return Rejection(candidate.center_xy, candidate.diameter_px, "not a cluster")
+    return Rejection.of(candidate.center_xy, candidate.diameter_px, Reason.NOT_A_CLUSTER)
 
 
 def _measure_blob(luminance, clipped, candidate: Candidate, min_diameter_px: float,
@@ -283,11 +284,11 @@ def _measure_blob(luminance, clipped, candidate: Candidate, min_diameter_px: flo
     if isinstance(m, Measurement) and candidate.diameter_px >= BLOB_RAYS_MIN_DIAMETER_PX:
         m = _by_rays_after(luminance, clipped, m, candidate.center_xy, candidate.diameter_px,
                            min_diameter_px, BLOB_RAYS_AFTER)
-    if isinstance(m, str):
-        return Rejection(candidate.center_xy, candidate.diameter_px, m)
-    reason = m.reason if m.reason is not None else ("too large" if m.diameter_px > max_diameter_px else None)
+    if isinstance(m, NoDisc):
+        return Rejection.of(candidate.center_xy, candidate.diameter_px, m)
+    reason = m.reason if m.reason is not None else (Reason.TOO_LARGE if m.diameter_px > max_diameter_px else None)
     if reason is not None:
-        return Rejection(m.center_xy, m.diameter_px, reason)
+        return Rejection.of(m.center_xy, m.diameter_px, reason)
     # A blob of overlapping discs is measured as its discs, each with the outline it shows.
     parts = split_cluster(m) if m.overlaps and m.diameter_px >= 2.0 * RESOLVABLE_PX else []
     if not parts:
@@ -313,12 +314,13 @@ def _circle_discs(luminance, clipped, measurements, min_diameter_px, max_diamete
         measured += 1
         m = _measure_place(luminance, clipped, xy, diameter, min_diameter_px,
                            rays_after=RAYS_AFTER if diameter >= RAYS_MIN_DIAMETER_PX else ())
-        reason = m if isinstance(m, str) else m.reason
-        if reason is None and not min_diameter_px <= m.diameter_px <= max_diameter_px:
-            reason = "too large"
-        if reason is None:
+        why = m if isinstance(m, NoDisc) else m.reason
+        if why is None and not min_diameter_px <= m.diameter_px <= max_diameter_px:
+            why = Reason.TOO_LARGE
+        if why is None:
             measurements.append(m)
         else:
-            rejected[reason] += 1
-            rejections.append(Rejection(xy, diameter, reason))
+            rejection = Rejection.of(xy, diameter, why)
+            rejected[rejection.rejected_because] += 1
+            rejections.append(rejection)
     return measured

@@ -3,8 +3,9 @@ its flags, and whether it is a disc (a :class:`Measurement`).
 
 Notes
 -----
-A candidate is kept as a disc when all of these hold (the rejection reasons;
-those of a candidate that has no outline are :mod:`bokehfit.discs.outlines`'s):
+A candidate is kept as a disc when all of these hold (the rejection reasons, each a
+:class:`bokehfit.discs.reasons.Reason`; those of a candidate that has no outline are
+:mod:`bokehfit.discs.outlines`'s):
 
 ``too small``       equal-area diameter below the minimum (default 4 px);
 ``faint``           plateau contrast ``p − b`` below ``MIN_SNR`` local noise levels,
@@ -54,6 +55,7 @@ from scipy import ndimage
 from bokehfit.discs.contours import _deep_concavities, _edge_gradient, polygon_area_centroid
 from bokehfit.discs.levels import Window, _contrast_ok, _median
 from bokehfit.discs.outlines import EDGE_WIDTH_MIN_PX, Outlined
+from bokehfit.discs.reasons import Reason
 
 __all__ = ["Measurement", "describe", "MIN_SOLIDITY", "MAX_ELONGATION", "MIN_THICKNESS_REL", "RING_DIP"]
 
@@ -91,7 +93,7 @@ RING_RIM_REL = (0.7, 0.95)
 
 @dataclass(frozen=True)
 class Measurement:
-    """A measured blob; ``reason`` is None for a disc, else why it was rejected."""
+    """A measured blob; ``reason`` is None for a disc, else the test of a disc it fails (the module's Notes)."""
 
     center_xy: tuple[float, float]
     diameter_px: float
@@ -106,7 +108,7 @@ class Measurement:
     saturated: bool
     clipped: bool
     overlaps: bool  #: cut out of a larger bright region, or shaped like two to four merged discs
-    reason: str | None
+    reason: Reason | None
     #: Per outline point: True where the outline is the disc's own edge and reliable (not the
     #: frame, a cutting circle, an occluder or clipped bloom).
     outline_reliable: np.ndarray | None = None
@@ -143,19 +145,19 @@ def describe(luminance, clipped_mask, found: Outlined, min_noise, min_diameter_p
 
     reason = None
     if diameter < min_diameter_px:
-        reason = "too small"
+        reason = Reason.TOO_SMALL
     elif clipping.beyond:
-        reason = "in a clipped region"
+        reason = Reason.IN_CLIPPED_REGION
     elif not _contrast_ok(contrast, noise, background, diameter):
-        reason = "faint"
+        reason = Reason.FAINT
     elif edge_width > max(EDGE_WIDTH_MIN_PX, EDGE_WIDTH_MAX_REL * 0.5 * diameter) and not clipping.saturated:
-        reason = "soft edge"
+        reason = Reason.SOFT_EDGE
     elif elongation > MAX_ELONGATION:
-        reason = "elongated"
+        reason = Reason.ELONGATED
     elif thickness < MIN_THICKNESS_REL:
-        reason = "line-like"
+        reason = Reason.LINE_LIKE
     elif solidity < MIN_SOLIDITY:
-        reason = "not compact"
+        reason = Reason.NOT_COMPACT
     return Measurement(
         center_xy=(cx + window.c0, cy + window.r0),
         diameter_px=diameter,
