@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 
+import cv2
 import numpy as np
 import pytest
 
@@ -77,3 +78,55 @@ def test_a_carpet_of_small_discs_costs_the_edge_search_nothing():
     start = time.process_time()
     assert find_circles(image, 8.0, 500.0) == []
     assert time.process_time() - start < 2.0  # 12 s of CPU when the finest band was transformed
+
+
+def _ring_photo(width: int, height: int, centres, diameter: float, seed: int = 3) -> np.ndarray:
+    """Soap-bubble rings (a rim a sixth of the radius wide, a centre a little above the ground) over lit
+    ground, blurred glows of foliage of about their size and larger: the ground's light varies as much
+    as the rings', so that no blob of a ring stands out of it."""
+    rng = np.random.default_rng(seed)
+    image = np.zeros((height, width), dtype=np.float32)
+    glows = rng.uniform((0, 0), (width, height), size=(width * height // 10_000, 2))
+    spread = 0.75 * diameter
+    for gx, gy in glows.astype(int):  # points of light, blurred below into glows of 0.06 at their peak
+        image[gy, gx] += 0.06 * 2.0 * math.pi * spread**2
+    image = 0.04 + cv2.GaussianBlur(image, (0, 0), spread)
+    yy, xx = np.mgrid[0:height, 0:width].astype(np.float32)
+    radius = 0.5 * diameter
+    for cx, cy in centres:
+        r = np.hypot(xx - cx, yy - cy)
+        inside = np.clip(radius - r + 0.5, 0.0, 1.0)  # the disc, its edge antialiased
+        rim = np.clip((r - 0.66 * radius) / (0.17 * radius), 0.0, 1.0)  # rising to the edge
+        image += inside * (0.015 + 0.08 * rim)
+    image = cv2.GaussianBlur(image, (0, 0), 1.0)  # the edge blur
+    return (image + rng.normal(0.0, 0.003, image.shape)).astype(np.float32)
+
+
+def _found(circles, centres, diameter):
+    return [any(math.dist(xy, c) < 0.15 * diameter and abs(d / diameter - 1) < 0.15 for xy, d in circles)
+            for c in centres]
+
+
+def test_rings_of_a_large_photo_are_sought_at_their_own_scale():
+    """A 9-MP photo's 40-px rings: the band of 32–64 px is searched on the photo halved, where they are
+    20 px across, not left out to keep one copy small (the copy is searched tile by tile)."""
+    from bokehfit.discs import circles
+
+    centres = [(600.0 + 700.0 * i, 500.0 + 650.0 * j) for i in range(4) for j in range(4)]
+    image = _ring_photo(3072, 3072, centres, 40.0)
+    assert 3072 * 3072 / 4 <= circles.MAX_COPY_PIXELS  # halved, the photo is one copy of its band
+    assert all(_found(find_circles(image, 8.0, 64.0), centres, 40.0))
+
+
+def test_a_circle_across_the_tiles_borders_is_found_once():
+    """Each tile is searched with a margin of the band's largest circle and keeps the circles whose
+    centres it holds: a disc astride a border (or a corner) of the tiles is found, and once."""
+    from bokehfit.discs import circles
+
+    border = 2.0 * circles.TILE_PX  # a border of the tiles in the photo halved, in full-resolution pixels
+    centres = [(border - 1.0, 700.0), (700.0, border + 1.0), (border, border), (border + 200.0, border - 300.0)]
+    image = _ring_photo(1600, 1600, centres, 48.0)
+    found = find_circles(image, 8.0, 64.0)
+    assert all(_found(found, centres, 48.0)), found
+    for centre in centres:
+        assert sum(math.dist(xy, centre) < 0.15 * 48.0 for xy, _ in found) == 1, (centre, found)
