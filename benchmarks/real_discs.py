@@ -98,6 +98,20 @@ def row(comparison, label: dict, seconds: float) -> dict:
             "verdict": judge(label, data), "reason": comparison.reason, "seconds": round(seconds, 1)}
 
 
+def labelled_photos(only: list[str] | None):
+    """(manifest entry, photo path, (labels path, labels)) of every reference photo here with its
+    labels, those whose file names start with ``only`` where given; the others are told and skipped."""
+    manifest = json.loads(MANIFEST.read_text(encoding="utf-8"))
+    for entry in manifest["photos"]:
+        if only and not any(entry["file"].startswith(o) for o in only):
+            continue
+        photo, found = find_photo(entry), labels_for(entry)
+        if photo is None or found is None:
+            print(f"{entry['file']}: {'missing' if photo is None else 'no labels'} (set BOKEHFIT_REFERENCE_DIR)")
+            continue
+        yield entry, photo, found
+
+
 def finder_only(args) -> int:
     """The search alone on every labelled photo: its usable discs scored against the labels (module notes)."""
     from types import SimpleNamespace
@@ -105,16 +119,9 @@ def finder_only(args) -> int:
     from bokehfit.discs import COMPARE_MIN_DIAMETER_PX, find_discs
     from bokehfit.io import load_photo
 
-    manifest = json.loads(MANIFEST.read_text(encoding="utf-8"))
     pooled, rows, seconds = DiscScore(0, 0, 0), [], 0.0
     missed = Counter()
-    for entry in manifest["photos"]:
-        if args.only and not any(entry["file"].startswith(o) for o in args.only):
-            continue
-        photo, found = find_photo(entry), labels_for(entry)
-        if photo is None or found is None:
-            print(f"{entry['file']}: {'missing' if photo is None else 'no labels'} (set BOKEHFIT_REFERENCE_DIR)")
-            continue
+    for entry, photo, found in labelled_photos(args.only):
         loaded = load_photo(photo)
         start = time.process_time()
         search = find_discs(loaded.luminance, loaded.clipped, min_diameter_px=COMPARE_MIN_DIAMETER_PX)
@@ -149,18 +156,11 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     if args.finder_only:
         return finder_only(args)
-    manifest = json.loads(MANIFEST.read_text(encoding="utf-8"))
     pooled = DiscScore(0, 0, 0)
     verdicts = {"own": Counter(), "person": Counter()}
     measured = [0, 0]  # the person's discs measured usable at their places, of all
     rows = []
-    for entry in manifest["photos"]:
-        if args.only and not any(entry["file"].startswith(o) for o in args.only):
-            continue
-        photo, found = find_photo(entry), labels_for(entry)
-        if photo is None or found is None:
-            print(f"{entry['file']}: {'missing' if photo is None else 'no labels'} (set BOKEHFIT_REFERENCE_DIR)")
-            continue
+    for entry, photo, found in labelled_photos(args.only):
         labels_path, labels = found
         start = time.perf_counter()
         comparison = compare_photo(photo)
