@@ -83,6 +83,28 @@ def get(server, path, host=None):
             return error.code, error.headers.get("Content-Type"), error.read()
 
 
+#: A module's relative ES imports (``import { x } from "./y.js";``, ``import "./y.js";``), the pages'
+#: only way to load another.
+ES_IMPORT = re.compile(r'^import\s+(?:[^;"]*?\sfrom\s+)?"\./([A-Za-z0-9_]+\.js)";', re.M)
+#: The folder of the pages' files (package data).
+STATIC = Path(__file__).resolve().parent.parent / "bokehfit" / "view" / "static"
+
+
+def page_modules(fetch, entry: str) -> dict[str, str]:
+    """Every ES module the page's script ``entry`` loads, itself included, by name: its text as
+    ``fetch(path)`` answers it (status, content type, bytes), each a served JavaScript file."""
+    found, todo = {}, [entry]
+    while todo:
+        name = todo.pop()
+        if name in found:
+            continue
+        status, kind, body = fetch(f"/{name}")
+        assert status == 200 and kind == "text/javascript; charset=utf-8", f"/{name}: {status} {kind}"
+        found[name] = body.decode("utf-8")
+        todo.extend(ES_IMPORT.findall(found[name]))
+    return found
+
+
 def post(server, path, body: bytes):
     """A POST as the viewer's page sends it: its Origin, the token of its HTML, JSON."""
     _, _, page = get(server, "/")
@@ -145,8 +167,20 @@ def test_display_pass_is_the_package_tone_map(server):
     source = body.decode("utf-8")
     assert "#include" not in source and RENDER_PARAMS.wgsl() in source
     assert shader_source("tonemap.wgsl").strip() in source and source.count("fn tone_map_srgb8(") == 1
-    page = get(server, "/viewer.js")[2].decode("utf-8")
-    assert "fn srgb_encode" not in page and "fn tone_map" not in page  # no second tone map in the page
+    for name, page in page_modules(lambda path: get(server, path), "viewer.js").items():
+        assert "fn srgb_encode" not in page and "fn tone_map" not in page, f"{name}: a second tone map in the page"
+
+
+def test_the_pages_modules_are_served_and_each_file_is_one_of_them(server):
+    """The page's ES modules, followed from viewer.js through their imports, are all served (a
+    missing route would stop the page); every script of ``static/`` is the Cornell-box page's or the
+    photo page's (test_view_photo.py follows photo.js)."""
+    modules = page_modules(lambda path: get(server, path), "viewer.js")
+    assert {"viewer.js", "viewer_renderer.js", "viewer_topdown.js", "common.js"} <= set(modules)
+    for path in sorted(STATIC.glob("*.js")):
+        assert path.name in modules or path.name.startswith("photo"), f"{path.name} is no module of a page"
+        if path.name not in modules:
+            assert get(server, f"/{path.name}")[0] == 404  # the photo page's, without a photo
 
 
 def f32(value) -> float:

@@ -1,6 +1,8 @@
 """The interactive viewer: ``bokehfit view`` serves a page that path-traces the Cornell box in the browser.
 
-The page (``static/``: index.html, viewer.js, style.css) runs the package's own
+The page (``static/``: index.html, style.css and the ES modules of viewer.js, one job
+each: viewer_renderer.js, viewer_points.js, viewer_topdown.js, viewer_controls.js,
+viewer_files.js, png_text.js, common.js) runs the package's own
 WGSL path tracer through WebGPU, progressively, and draws a top-down sketch of
 the box with the camera, the focus plane and the depth of field. The server
 (:mod:`bokehfit.view.server`) hands it the shader with its includes resolved,

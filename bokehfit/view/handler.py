@@ -57,10 +57,19 @@ MAX_HEADER_BYTES = 32768
 #: (sent back in ``TOKEN_HEADER`` with every write).
 TOKEN_PLACEHOLDER = b"%BOKEHFIT_TOKEN%"
 
+#: The Cornell-box page and its ES modules (common.js is the photo page's too), each named:
+#: the server answers no other file of ``static/``.
 _STATIC = {
     "/": ("index.html", "text/html; charset=utf-8"),
     "/index.html": ("index.html", "text/html; charset=utf-8"),
     "/viewer.js": ("viewer.js", "text/javascript; charset=utf-8"),
+    "/viewer_renderer.js": ("viewer_renderer.js", "text/javascript; charset=utf-8"),
+    "/viewer_points.js": ("viewer_points.js", "text/javascript; charset=utf-8"),
+    "/viewer_topdown.js": ("viewer_topdown.js", "text/javascript; charset=utf-8"),
+    "/viewer_controls.js": ("viewer_controls.js", "text/javascript; charset=utf-8"),
+    "/viewer_files.js": ("viewer_files.js", "text/javascript; charset=utf-8"),
+    "/png_text.js": ("png_text.js", "text/javascript; charset=utf-8"),
+    "/common.js": ("common.js", "text/javascript; charset=utf-8"),
     "/style.css": ("style.css", "text/css; charset=utf-8"),
 }
 #: The pages of ``bokehfit view PHOTO`` (404 where the server has no photo).

@@ -5,8 +5,10 @@ which checks it before any route sees it (its module says how) and then runs its
 
 Routes
 ------
-``GET /``, ``/viewer.js``, ``/style.css``
-    The page (package data of :mod:`bokehfit.view`).
+``GET /``, ``/style.css``, ``/viewer.js`` and the modules it imports: ``/viewer_renderer.js``,
+``/viewer_points.js``, ``/viewer_topdown.js``, ``/viewer_controls.js``, ``/viewer_files.js``,
+``/png_text.js``, ``/common.js`` (the photo page's too)
+    The page (package data of :mod:`bokehfit.view`), each file named in the handler's table.
 ``GET /pathtrace.wgsl``
     The path tracer's WGSL, every include resolved.
 ``GET /display.wgsl``

@@ -44,7 +44,8 @@ __all__ = [
     "uniform_values",
 ]
 
-#: The scalar types whose components the page packs (viewer.js, ``Renderer.setValues``).
+#: The scalar types whose components the pages pack (``SETTERS`` of common.js: viewer_renderer.js,
+#: ``Renderer.setValues``; photo.js's kernel renderer).
 _PAGE_SCALARS = ("f32", "u32", "i32")
 
 
