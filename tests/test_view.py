@@ -174,11 +174,12 @@ def test_display_pass_is_the_package_tone_map(server):
 def test_the_pages_modules_are_served_and_each_file_is_one_of_them(server):
     """The page's ES modules, followed from viewer.js through their imports, are all served (a
     missing route would stop the page); every script of ``static/`` is the Cornell-box page's or the
-    photo page's (test_view_photo.py follows photo.js)."""
+    photo page's (test_view_photo.py follows photo.js), and none is over 600 lines."""
     modules = page_modules(lambda path: get(server, path), "viewer.js")
     assert {"viewer.js", "viewer_renderer.js", "viewer_topdown.js", "common.js"} <= set(modules)
     for path in sorted(STATIC.glob("*.js")):
         assert path.name in modules or path.name.startswith("photo"), f"{path.name} is no module of a page"
+        assert len(path.read_text(encoding="utf-8").splitlines()) <= 600, f"{path.name} is over 600 lines"
         if path.name not in modules:
             assert get(server, f"/{path.name}")[0] == 404  # the photo page's, without a photo
 

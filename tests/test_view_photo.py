@@ -24,7 +24,9 @@ from bokehfit.compare import compare_photo
 from bokehfit.discs.labels import DiscLabels
 from bokehfit.view import ViewerServer
 from bokehfit.view.photo import MAX_REFIT_DISCS
+from test_view import STATIC, page_modules
 from test_view import artifacts, browser  # noqa: F401 (fixtures)
+from test_view import get as get_typed
 
 EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "hexagon_85mm_f2.jpg"
 #: Longest wait for one compare in the tests (s): about 2 s alone, more on two busy cores.
@@ -178,6 +180,13 @@ def test_refit_is_stopped_at_its_time_bound(tmp_path):
         assert state["state"] == "failed" and "longer than" in state["error"]
     finally:
         session.close()
+
+
+def test_the_pages_modules_are_served(server):
+    """photo.js and the ES modules it imports are all served, and every photo module of ``static/`` is one of them."""
+    modules = page_modules(lambda path: get_typed(server, path), "photo.js")
+    assert {"photo.js", "photo_kernel.js", "common.js"} <= set(modules)
+    assert {path.name for path in STATIC.glob("photo*.js")} <= set(modules)
 
 
 def test_without_a_photo_the_photo_routes_answer_404():

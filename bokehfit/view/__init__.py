@@ -8,6 +8,10 @@ the box with the camera, the focus plane and the depth of field. The server
 (:mod:`bokehfit.view.server`) hands it the shader with its includes resolved,
 the uniform layout and every uniform value, all computed by the Python
 renderer's code, so the browser and ``bokehfit render`` trace the same paths.
+
+``bokehfit view PHOTO`` adds the photo's page (photo.html and the ES modules of photo.js:
+photo_state.js, photo_draw.js, photo_edit.js, photo_results.js, photo_match.js,
+photo_kernel.js, photo_refit.js, with common.js), whose compare runs in :mod:`bokehfit.view.photo`.
 """
 
 from bokehfit.view.server import ViewerServer

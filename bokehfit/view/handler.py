@@ -72,10 +72,17 @@ _STATIC = {
     "/common.js": ("common.js", "text/javascript; charset=utf-8"),
     "/style.css": ("style.css", "text/css; charset=utf-8"),
 }
-#: The pages of ``bokehfit view PHOTO`` (404 where the server has no photo).
+#: The page of ``bokehfit view PHOTO`` and its ES modules (404 where the server has no photo).
 _PHOTO_STATIC = {
     "/photo": ("photo.html", "text/html; charset=utf-8"),
     "/photo.js": ("photo.js", "text/javascript; charset=utf-8"),
+    "/photo_state.js": ("photo_state.js", "text/javascript; charset=utf-8"),
+    "/photo_draw.js": ("photo_draw.js", "text/javascript; charset=utf-8"),
+    "/photo_edit.js": ("photo_edit.js", "text/javascript; charset=utf-8"),
+    "/photo_results.js": ("photo_results.js", "text/javascript; charset=utf-8"),
+    "/photo_match.js": ("photo_match.js", "text/javascript; charset=utf-8"),
+    "/photo_kernel.js": ("photo_kernel.js", "text/javascript; charset=utf-8"),
+    "/photo_refit.js": ("photo_refit.js", "text/javascript; charset=utf-8"),
 }
 #: The photo's routes: GET for the photo, its results and a refit's state; POST for the writes.
 _PHOTO_GET = ("/photo/info.json", "/photo/image.jpg", "/photo/job", "/photo/result.json", "/photo/tiles.json", "/photo/report.html",

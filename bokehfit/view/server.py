@@ -38,7 +38,9 @@ Routes
     the contents of the path tracer's ``mask_table`` binding, which the page
     uploads as they are.
 
-``GET /photo``, ``/photo.js``; ``/photo/info.json``, ``/photo/image.jpg``
+``GET /photo``, ``/photo.js`` and the modules it imports: ``/photo_state.js``, ``/photo_draw.js``,
+``/photo_edit.js``, ``/photo_results.js``, ``/photo_match.js``, ``/photo_kernel.js``,
+``/photo_refit.js`` (and ``/common.js``, above); ``/photo/info.json``, ``/photo/image.jpg``
     With a photo (``bokehfit view PHOTO``, :mod:`bokehfit.view.photo`): its page,
     its name, size, sha256 and the shapes a refit may try, and its display copy.
     ``info.json`` also says how to run the kernel renderer (:func:`~bokehfit.view.wgsl.kernel_config`).

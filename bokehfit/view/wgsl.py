@@ -45,7 +45,7 @@ __all__ = [
 ]
 
 #: The scalar types whose components the pages pack (``SETTERS`` of common.js: viewer_renderer.js,
-#: ``Renderer.setValues``; photo.js's kernel renderer).
+#: ``Renderer.setValues``; photo_kernel.js, ``pack``).
 _PAGE_SCALARS = ("f32", "u32", "i32")
 
 
