@@ -3,6 +3,7 @@
 Usage::
 
     BOKEHFIT_REFERENCE_DIR=path/to/reference_photos python benchmarks/real_speed.py [--json out.json] [--only 05 14]
+        [--coverages]
 
 In one process: a warm-up call on the small synthetic photo (``bokehfit.bench.compare.WARMUP``),
 then the clean synthetic 24-MP photo of ``bokehfit bench`` (``BIG``: 50 pentagons on a dark
@@ -17,6 +18,12 @@ Per photo the table gives those ratios, ``compare``'s stages (``Comparison.timin
 detect, fit, render, metrics) and the fit's steps (``ApertureFit.timing_s``: choose, screen, the
 per-family fits summed, joint, features, the rest). ``--json`` also keeps each photo's answer
 (status, shape, angle, features, diameter) so that two runs can be checked for the same answers.
+
+``--coverages`` times nothing: per photo it counts the exact coverages the fit computes (plain and
+with the rim profile: ``bokehfit.fit.disc_model``'s calls of ``coverage`` and ``rim_coverage``)
+and how many of them ``scipy.optimize.least_squares`` asks for while it takes a finite-difference
+Jacobian (its ``approx_derivative`` on the stack): the share of the fit's work a Jacobian of the
+model's own would save.
 """
 
 from __future__ import annotations
@@ -83,15 +90,53 @@ def table(rows: dict, reference: dict) -> list[str]:
     return lines
 
 
+def count_coverages(entries: list[dict]) -> None:
+    """Per photo, the fit's exact coverages, and the share of them taken for a finite-difference Jacobian."""
+    import traceback
+
+    import bokehfit.fit.disc_model as disc_model
+
+    counts: dict[str, int] = {}
+
+    def counted(kind, function):
+        def wrapper(*args, **kwargs):
+            jacobian = any(frame.name == "approx_derivative" for frame in traceback.extract_stack())
+            key = f"{kind}, {'Jacobian' if jacobian else 'step'}"
+            counts[key] = counts.get(key, 0) + 1
+            return function(*args, **kwargs)
+        return wrapper
+
+    disc_model.coverage = counted("plain", disc_model.coverage)
+    disc_model.rim_coverage = counted("rim", disc_model.rim_coverage)
+    print("| photo | plain: steps | plain: Jacobian | rim: steps | rim: Jacobian | share for the Jacobian |")
+    print("|---|---|---|---|---|---|")
+    for entry in entries:
+        path = find_photo(entry)
+        if path is None:
+            print(f"{entry['file']}: missing", file=sys.stderr)
+            continue
+        counts.clear()
+        compare_photo(path)
+        cells = [counts.get(f"{kind}, {when}", 0) for kind in ("plain", "rim") for when in ("step", "Jacobian")]
+        total = sum(cells)
+        share = "-" if not total else f"{(cells[1] + cells[3]) / total:.0%}"
+        print(f"| {entry['file'][:2]} | " + " | ".join(str(c) for c in cells) + f" | {share} |", flush=True)
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--json", type=Path, help="write the figures and answers here")
     parser.add_argument("--only", nargs="*", help="photo numbers (01 … 17) to run")
+    parser.add_argument("--coverages", action="store_true",
+                        help="count the fit's exact coverages, and those taken for a finite-difference Jacobian")
     args = parser.parse_args(argv)
 
     entries = json.loads(MANIFEST.read_text(encoding="utf-8"))["photos"]
     if args.only:
         entries = [e for e in entries if e["file"][:2] in args.only]
+    if args.coverages:
+        count_coverages(entries)
+        return 0
     warmup, _ = cached_photo(WARMUP)
     big, _ = cached_photo(BIG)
     compare_photo(warmup, **GEOMETRY)
