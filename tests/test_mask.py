@@ -18,7 +18,7 @@ from bokehfit.cli import main
 from bokehfit.errors import InputError
 from bokehfit.fit.families import FAMILIES
 from bokehfit.kernels import compute_kernel, render_kernel
-from bokehfit.kernels.exact import mask_coverage
+from bokehfit.kernels.masks import mask_coverage
 from bokehfit.scene import build_scene, make_lens, make_settings, render
 
 #: Significance level of the chi-square tests.

@@ -24,7 +24,7 @@ scaled by (1 + red) and (1 + blue). The near side is :meth:`Aperture.near`.
 
 A ``mask`` aperture (design.md §3b): ``exact`` integrates its piecewise-constant
 transmission over each pixel exactly, at any angle and squeeze
-(:func:`bokehfit.kernels.exact.mask_coverage`); ``mc`` samples it with the
+(:func:`bokehfit.kernels.masks.mask_coverage`); ``mc`` samples it with the
 WGSL twin ``sample_mask`` from the CDF tables in a storage buffer; ``raster``
 draws its transmission as a texture on the image's quad, super-sampled as the
 outlines are (:mod:`bokehfit.kernels.raster`).
@@ -48,7 +48,8 @@ from bokehfit.apertures import Aperture
 from bokehfit.errors import InputError
 from bokehfit.gpu.runtime import AdapterChoice
 from bokehfit.kernels.accuracy import plan_kernel
-from bokehfit.kernels.exact import coverage, mask_coverage, quadrant_area, rim_coverage
+from bokehfit.kernels.exact import coverage, quadrant_area, rim_coverage
+from bokehfit.kernels.masks import mask_coverage
 from bokehfit.validate import RANGES, check
 
 __all__ = ["AUTO", "METHODS", "SAMPLINGS", "SIDES", "Kernel", "KernelMethod", "KernelClippedWarning", "compute_kernel", "render_kernel"]

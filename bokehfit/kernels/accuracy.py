@@ -47,7 +47,7 @@ from dataclasses import dataclass
 
 from bokehfit.apertures import Aperture
 from bokehfit.errors import InputError
-from bokehfit.kernels.exact import mask_border_segments
+from bokehfit.kernels.masks import mask_border_segments
 from bokehfit.validate import RANGES, check
 
 __all__ = ["MIN_TOLERANCE", "Plan", "plan_kernel", "predicted_l1"]

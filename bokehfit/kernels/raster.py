@@ -21,7 +21,7 @@ squeezed image rectangle. Each fragment maps its position back to the mask's
 cells (the inverse of scale·squeeze·rotation) and takes that cell's
 transmission with ``texelFetch`` (no filtering: the density is piecewise
 constant, :func:`bokehfit.apertures.mask_pdf`), so the super-samples
-converge to the exact box integral (:func:`bokehfit.kernels.exact.mask_coverage`)
+converge to the exact box integral (:func:`bokehfit.kernels.masks.mask_coverage`)
 as they do to the area coverage of an outline.
 """
 
