@@ -21,9 +21,9 @@ per-family fits summed, joint, features, the rest). ``--json`` also keeps each p
 
 ``--coverages`` times nothing: per photo it counts the exact coverages the fit computes (plain and
 with the rim profile: ``bokehfit.fit.disc_model``'s calls of ``coverage`` and ``rim_coverage``)
-and how many of them ``scipy.optimize.least_squares`` asks for while it takes a finite-difference
-Jacobian (its ``approx_derivative`` on the stack): the share of the fit's work a Jacobian of the
-model's own would save.
+and how many of them are taken for the Jacobian (scipy's finite differences, or the fit's own
+Jacobian, on the stack); where the tree has them, also the exact coverages with their slopes
+(``coverage_slopes``) that the fit's own Jacobian takes for a disc's centre and size.
 """
 
 from __future__ import annotations
@@ -44,6 +44,9 @@ from bokehfit.bench.compare import BIG, GEOMETRY, WARMUP, cached_photo  # noqa: 
 from bokehfit.compare import compare_photo  # noqa: E402
 
 STAGES = ("load", "detect", "fit", "render", "metrics")
+#: Frames on the stack while a Jacobian is taken: scipy's finite differences (trees before the fit
+#: had a Jacobian of its own) and the fit's own (``bokehfit.fit.objective.jacobian``).
+JACOBIAN_FRAMES = ("approx_derivative", "jac")
 #: The fit's steps shown as columns; ``families`` sums the ``family <name>`` steps, ``other`` the rest.
 STEPS = ("choose", "screen", "families", "joint", "features")
 
@@ -100,7 +103,7 @@ def count_coverages(entries: list[dict]) -> None:
 
     def counted(kind, function):
         def wrapper(*args, **kwargs):
-            jacobian = any(frame.name == "approx_derivative" for frame in traceback.extract_stack())
+            jacobian = any(frame.name in JACOBIAN_FRAMES for frame in traceback.extract_stack())
             key = f"{kind}, {'Jacobian' if jacobian else 'step'}"
             counts[key] = counts.get(key, 0) + 1
             return function(*args, **kwargs)
@@ -108,8 +111,12 @@ def count_coverages(entries: list[dict]) -> None:
 
     disc_model.coverage = counted("plain", disc_model.coverage)
     disc_model.rim_coverage = counted("rim", disc_model.rim_coverage)
-    print("| photo | plain: steps | plain: Jacobian | rim: steps | rim: Jacobian | share for the Jacobian |")
-    print("|---|---|---|---|---|---|")
+    kinds = ["plain", "rim"]
+    if hasattr(disc_model, "coverage_slopes"):  # the model's own slopes (a coverage and its derivatives)
+        disc_model.coverage_slopes = counted("slopes", disc_model.coverage_slopes)
+        kinds.append("slopes")
+    print("| photo | " + " | ".join(f"{k}: steps | {k}: Jacobian" for k in kinds) + " | share for the Jacobian |")
+    print("|---|" + "---|---|" * len(kinds) + "---|")
     for entry in entries:
         path = find_photo(entry)
         if path is None:
@@ -117,9 +124,9 @@ def count_coverages(entries: list[dict]) -> None:
             continue
         counts.clear()
         compare_photo(path)
-        cells = [counts.get(f"{kind}, {when}", 0) for kind in ("plain", "rim") for when in ("step", "Jacobian")]
+        cells = [counts.get(f"{kind}, {when}", 0) for kind in kinds for when in ("step", "Jacobian")]
         total = sum(cells)
-        share = "-" if not total else f"{(cells[1] + cells[3]) / total:.0%}"
+        share = "-" if not total else f"{sum(cells[1::2]) / total:.0%}"
         print(f"| {entry['file'][:2]} | " + " | ".join(str(c) for c in cells) + f" | {share} |", flush=True)
 
 

@@ -25,7 +25,7 @@ import cv2
 import numpy as np
 
 from bokehfit.apertures import Aperture, image_to_aperture
-from bokehfit.kernels.exact import coverage, rim_coverage
+from bokehfit.kernels.exact import coverage, coverage_slopes, rim_coverage
 
 if TYPE_CHECKING:
     from bokehfit.fit.pixels import PixelFit
@@ -35,6 +35,7 @@ __all__ = [
     "DiscModel",
     "disc_profile",
     "model_window",
+    "profile_slopes",
     "render_disc_model",
 ]
 
@@ -70,24 +71,65 @@ def disc_profile(
     (aperture, size, centre, diameter, field position): a fit's steps that change only the blur
     or the levels (a Jacobian's blur column, a plateau's) reuse the coverage instead of
     integrating it again. It keeps the latest, about ``COVERS_BYTES`` in all."""
-    centre = (size - 1) / 2.0
     where = None if aperture.vignetting is None else field_position
     key = (aperture, size, disc["cx"], disc["cy"], disc["diameter_px"], None if where is None else tuple(where))
     cover = None if covers is None else covers.get(key)
     if cover is None:
-        scale = max(disc["diameter_px"], 1e-3) * math.sqrt(math.pi) / 2.0
-        (offset_xy,) = image_to_aperture([[disc["cy"] - centre, disc["cx"] - centre]])
+        scale, offset_xy = _placement(disc, size)
         if aperture.rim != 0.0:
             cover, _ = rim_coverage(aperture, scale, size, field_position=where, supersample=RIM_FIT_SUPERSAMPLE,
-                                    max_chord_error=1e-4, offset_xy=tuple(offset_xy))
+                                    max_chord_error=1e-4, offset_xy=offset_xy)
         else:
-            cover = coverage(_outline(aperture, where, covers), scale, size, offset_xy=tuple(offset_xy))
+            cover = coverage(_outline(aperture, where, covers), scale, size, offset_xy=offset_xy)
         cover = cover.astype(np.float32)
         if covers is not None:
             covers[key] = cover
             while (len(covers) - (_OUTLINES in covers)) * cover.nbytes > COVERS_BYTES and len(covers) > 2:
                 del covers[next(k for k in covers if k != _OUTLINES)]  # the oldest
     return cv2.GaussianBlur(cover, (0, 0), max(disc["blur_px"], BLUR_RANGE[0]), borderType=cv2.BORDER_REPLICATE)
+
+
+def _placement(disc: Mapping[str, float], size: int) -> tuple[float, tuple[float, float]]:
+    """The aperture's scale (px a unit-area unit) and its centre's offset (x, y) from the crop's centre."""
+    centre = (size - 1) / 2.0
+    (offset_xy,) = image_to_aperture([[disc["cy"] - centre, disc["cx"] - centre]])
+    return max(disc["diameter_px"], 1e-3) * SCALE_PER_DIAMETER, (float(offset_xy[0]), float(offset_xy[1]))
+
+
+#: A unit-area shape's scale per px of equal-area diameter: area (d·√π/2)² = π d²/4.
+SCALE_PER_DIAMETER = math.sqrt(math.pi) / 2.0
+#: The disc's parameters whose slopes :func:`profile_slopes` gives.
+SLOPED = ("cx", "cy", "diameter_px")
+
+
+def profile_slopes(
+    aperture: Aperture,
+    disc: Mapping[str, float],
+    size: int,
+    field_position: Sequence[float] | None = None,
+    covers: dict | None = None,
+) -> dict[str, np.ndarray] | None:
+    """∂/∂cx, ∂/∂cy and ∂/∂diameter_px of :func:`disc_profile` (flattened, by name), or None where
+    the aperture's light has no closed form (a ``rim``, a ``mask``).
+
+    The coverage's exact slopes (:func:`bokehfit.kernels.exact.coverage_slopes`) blurred as the
+    profile is: the blur is linear. ``covers`` lends its outlines (:func:`disc_profile`)."""
+    if aperture.rim != 0.0 or aperture.mask is not None:
+        return None
+    where = None if aperture.vignetting is None else field_position
+    scale, offset_xy = _placement(disc, size)
+    slopes = coverage_slopes(_outline(aperture, where, covers), scale, size, offset_xy)
+    # The offset is image_to_aperture of (cy − centre, cx − centre): linear, so its columns are the chain rule's.
+    (by_cx,), (by_cy,) = image_to_aperture([[0.0, 1.0]]), image_to_aperture([[1.0, 0.0]])
+    sigma = max(disc["blur_px"], BLUR_RANGE[0])
+    sized = SCALE_PER_DIAMETER if disc["diameter_px"] > 1e-3 else 0.0
+    raw = {
+        "cx": by_cx[0] * slopes.by_offset_x + by_cx[1] * slopes.by_offset_y,
+        "cy": by_cy[0] * slopes.by_offset_x + by_cy[1] * slopes.by_offset_y,
+        "diameter_px": sized * slopes.by_scale,
+    }
+    return {name: cv2.GaussianBlur(slope, (0, 0), sigma, borderType=cv2.BORDER_REPLICATE).ravel()
+            for name, slope in raw.items()}
 
 
 #: Key of :func:`disc_profile`'s ``covers`` under which the outlines of the latest apertures are kept.

@@ -19,8 +19,9 @@ clip and becomes a fitted parameter; its outline still fixes the shape.
 each disc its own centre, size, blur and levels, all of them the shared
 aperture parameters (and the vignetting, which only the discs' spread over the
 frame can tell). The Jacobian is block-sparse (a disc's residuals depend on
-its own parameters and the shared ones), so finite differences cost a few
-renders of every disc, not one per parameter. Each disc's residuals are
+its own parameters and the shared ones). Its columns are the model's own slopes
+where it has them (a disc's centre and size) and finite differences where not
+(:mod:`bokehfit.fit.objective`). Each disc's residuals are
 divided by its own noise level (from its single-disc fit), so a bright disc
 does not outvote the others.
 
@@ -32,7 +33,7 @@ cov = (JᵀJ)⁻¹ · RSS / (n − k).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -43,6 +44,7 @@ from bokehfit.discs import Disc
 from bokehfit.fit.crop import DiscCrop, crop_disc
 from bokehfit.fit.disc_model import render_disc_model
 from bokehfit.fit.families import Family
+from bokehfit.fit.objective import censored_residuals, jacobian, weighted_residuals
 from bokehfit.fit.vector import Block, FitVector, fit_vector
 
 __all__ = [
@@ -105,17 +107,6 @@ class PixelFit:
         return n * math.log(max(self.rss, 1e-300) / n) + self.parameter_count * math.log(n)
 
 
-def _residuals(model: np.ndarray, crop: DiscCrop) -> np.ndarray:
-    """model − data; where the source is clipped only a model below the recorded value is an error;
-    where the light is not the disc's, none."""
-    residual = model - crop.data
-    if crop.censored is not None:
-        residual[crop.censored] = np.minimum(residual[crop.censored], 0.0)
-    if crop.ignored is not None:
-        residual[crop.ignored] = 0.0
-    return residual
-
-
 @dataclass(frozen=True)
 class JointFit:
     """Several discs fitted with one aperture: the aperture, each disc's fit, and the evidence."""
@@ -153,7 +144,7 @@ def fit_discs(
     free = tuple(start.parameters) if free is None else tuple(free)
     noise = np.ones(len(crops)) if noise is None else np.maximum(np.asarray(noise, dtype=np.float64), 1e-12)
     vector = fit_vector(crops, start, free, disc_starts)
-    result = _solve(_weighted_residuals(crops, vector, noise), vector, _sparsity(crops, vector))
+    result = _solve(crops, vector, noise)
     aperture = vector.wrapped_at(result.x)
     evidence = _evidence(result, crops, vector)
     fits = [
@@ -171,53 +162,22 @@ def fit_discs(
     )
 
 
-def _weighted_residuals(crops: Sequence[DiscCrop], vector: FitVector,
-                        noise: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
-    """What the fit minimises: every disc's residuals over its noise level, one disc after the other."""
+def _solve(crops: Sequence[DiscCrop], vector: FitVector, noise: np.ndarray) -> OptimizeResult:
+    """Bounded least squares (trust-region reflective) from the vector's start, with the model's own
+    Jacobian (:func:`bokehfit.fit.objective.jacobian`)."""
     covers: dict = {}  # the coverages of the last steps (disc_profile)
-
-    def residuals(x: np.ndarray) -> np.ndarray:
-        aperture, discs = vector.aperture_at(x), vector.discs_at(x)
-        turned = aperture.near() if any(c.turned for c in crops) else aperture
-        parts = [
-            _residuals(render_disc_model(turned if c.turned else aperture, d, c.size, c.data, c.field_position,
-                                         c.censored, c.ignored, covers).model, c) / s
-            for c, d, s in zip(crops, discs, noise)
-        ]
-        return np.concatenate(parts)
-
-    return residuals
-
-
-def _sparsity(crops: Sequence[DiscCrop], vector: FitVector) -> np.ndarray | None:
-    """Which residuals depend on which parameters: a disc's on the shared ones and its own (None for one disc)."""
-    if len(crops) <= 1:
-        return None
-    rows = [c.data.size for c in crops]
-    sparsity = np.zeros((sum(rows), vector.size), dtype=bool)
-    row, shared = 0, len(vector.free)
-    for block, count in zip(vector.discs, rows):
-        sparsity[row : row + count, :shared] = True
-        sparsity[row : row + count, block.at : block.at + len(block.names)] = True
-        row += count
-    return sparsity
-
-
-def _solve(residuals: Callable[[np.ndarray], np.ndarray], vector: FitVector,
-           sparsity: np.ndarray | None) -> OptimizeResult:
-    """Bounded least squares (trust-region reflective) from the vector's start."""
+    sparse = len(crops) > 1  # the Jacobian is block-sparse
     return least_squares(
-        residuals,
+        weighted_residuals(crops, vector, noise, covers),
         np.array(vector.start, dtype=np.float64),
+        jac=jacobian(crops, vector, noise, covers, sparse),
         bounds=(vector.lower, vector.upper),
         method="trf",
         x_scale="jac",
         max_nfev=MAX_EVALUATIONS,
-        diff_step=1e-4,
         ftol=TOLERANCE,
         xtol=TOLERANCE,
-        jac_sparsity=sparsity,
-        tr_solver="exact" if sparsity is None else "lsmr",
+        tr_solver="lsmr" if sparse else "exact",
     )
 
 
@@ -270,7 +230,7 @@ def _disc_fit(crop: DiscCrop, values: Mapping[str, float], block: Block, apertur
         plateau=float(rendered.plateau),
         background=float(rendered.background),
         blur_px=full.blur_px,
-        rss=float(np.sum(_residuals(rendered.model, crop) ** 2)),
+        rss=float(np.sum(censored_residuals(rendered.model, crop) ** 2)),
         pixels=crop.pixels,
         uncertainty=uncertainty,
         evaluations=int(result.nfev),

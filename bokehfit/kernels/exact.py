@@ -32,14 +32,21 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Callable
+from typing import NamedTuple
 
 import numpy as np
 
-from bokehfit.apertures import Aperture, Arc, Outline, Segment, aperture_rows_to_image, image_to_aperture
+from bokehfit.apertures import (
+    Aperture,
+    Arc,
+    Outline,
+    Segment,
+    aperture_rows_to_image,
+    image_to_aperture,
+)
 from bokehfit.apertures.samplers import x_minus_sin
 
-__all__ = ["RIM_SUPERSAMPLE", "coverage", "quadrant_area", "radial_fraction", "rim_coverage"]
+__all__ = ["RIM_SUPERSAMPLE", "CoverageSlopes", "coverage", "coverage_slopes", "quadrant_area", "radial_fraction", "rim_coverage"]
 
 
 #: Columns of one elliptic piece's row in :attr:`_Boundary.arcs` (see :func:`_elliptic_pieces`).
@@ -96,12 +103,17 @@ def _arc_integral(arcs: np.ndarray, x: np.ndarray) -> np.ndarray:
     """∫ f from each elliptic piece's left end to x: the trapezoid under the chord minus the elliptic
     segment (:func:`_elliptic_pieces`). ``arcs``: columns (rows of :data:`_ARC_COLUMNS`, each
     shaped to broadcast against ``x``)."""
-    cx, cy, rx, ry, side, x_left, y_left, theta_left, base, upper = arcs[:10]
+    cx, _, rx, ry, _, x_left, y_left, theta_left, base, upper = arcs[:10]
     angle = np.arccos(np.clip((x - cx) / rx, -1.0, 1.0))
     theta = base + np.where(upper > 0.0, angle, 2.0 * math.pi - angle)
+    return 0.5 * (y_left + _arc_height(arcs, x)) * (x - x_left) - 0.5 * rx * ry * x_minus_sin(theta - theta_left)
+
+
+def _arc_height(arcs: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """f(x) of each elliptic piece (``arcs`` as for :func:`_arc_integral`)."""
+    cx, cy, rx, ry, side = arcs[:5]
     t = np.clip((x - cx) / rx, -1.0, 1.0)
-    y = cy + side * ry * np.sqrt(np.maximum((1.0 - t) * (1.0 + t), 0.0))
-    return 0.5 * (y_left + y) * (x - x_left) - 0.5 * rx * ry * x_minus_sin(theta - theta_left)
+    return cy + side * ry * np.sqrt(np.maximum((1.0 - t) * (1.0 + t), 0.0))
 
 
 def _arc_crossing(arcs: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -354,6 +366,80 @@ def coverage(
     inside[1:] = cells.ravel()[probes] > 0.5  # 0 or 1 up to rounding
     cells = np.where(crossed, cells, inside[regions])
     return np.clip(aperture_rows_to_image(cells), 0.0, 1.0)  # rows of `cells` run up in y
+
+
+def _quadrant_slopes(boundary: _Boundary, xs: np.ndarray, ys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """∂F/∂X and ∂F/∂Y of the module notes on the grid ys × xs (each of shape (len(ys), len(xs))).
+
+    ∂F/∂X is the length of the shape on the line x = X below Y: −Σ sign · min(f(X), Y) over the
+    pieces whose span holds X. ∂F/∂Y is its length on y = Y left of X: −Σ sign · the length of
+    [x_min, clamp(X)] where f > Y, t − min(t, x*) for a piece that rises, min(t, x*) − x_min for
+    one that falls (:func:`_area_below_left`'s terms, differentiated)."""
+    shape = (len(ys), len(xs))
+    by_x, by_y = np.zeros(shape), np.zeros(shape)
+    count = len(boundary.segments) + len(boundary.arcs)
+    if count == 0 or by_x.size == 0:
+        return by_x, by_y
+    t, c, _, _, start, _, sign, increasing = _piece_columns(boundary, xs, ys)
+    sides = boundary.segments.T[:, :, None]
+    left = sides[0] < sides[2]
+    xa, ya = np.where(left, sides[0], sides[2]), np.where(left, sides[1], sides[3])
+    slope = (np.where(left, sides[3], sides[1]) - ya) / np.abs(sides[2] - sides[0])
+    height = np.concatenate([ya + slope * (t[: len(sides[0])] - xa),
+                             _arc_height(boundary.arcs.T[:, :, None], t[len(sides[0]) :])])
+    within = (t > start[:, :, 0]) & (t == xs[None, :])  # X strictly inside the piece's span
+    rising = increasing[:, None, None]
+    step = max(1, _SIDE_CHUNK // (count * max(len(xs), 1)))
+    for lo in range(0, len(ys), step):
+        row = slice(lo, lo + step)
+        y = ys[None, row, None]
+        x_cross = np.minimum(t[:, None, :], c[:, row, None])
+        by_x[row] = (-sign * np.where(within[:, None, :], np.minimum(height[:, None, :], y), 0.0)).sum(axis=0)
+        by_y[row] = (-sign * np.where(rising, t[:, None, :] - x_cross, x_cross - start)).sum(axis=0)
+    return by_x, by_y
+
+
+class CoverageSlopes(NamedTuple):
+    """A pixel grid's exact coverage and its derivatives (image rows, as :func:`coverage`)."""
+
+    cover: np.ndarray
+    by_offset_x: np.ndarray  #: ∂/∂ offset x (right)
+    by_offset_y: np.ndarray  #: ∂/∂ offset y (up)
+    by_scale: np.ndarray  #: ∂/∂ scale
+
+
+def coverage_slopes(
+    aperture: Aperture | Outline,
+    scale: float,
+    size: int,
+    offset_xy: tuple[float, float] = (0.0, 0.0),
+    field_position=None,
+) -> CoverageSlopes:
+    """:func:`coverage` on the whole size × size grid and its exact derivatives by the offset and the scale.
+
+    Notes
+    -----
+    Moving the shape by (dx, dy) is F evaluated at (X − dx, Y − dy), so a pixel's derivative by
+    the offset is minus the second difference of ∂F/∂X (∂F/∂Y) over its corners: the shape's
+    chords on the pixel's left and right (lower and upper) borders. The shape at scale s has
+    F_s(X, Y) = s² F_1(X/s, Y/s), so ∂F_s/∂s = (2F − X ∂F/∂X − Y ∂F/∂Y) / s, X and Y taken
+    from the shape's centre (:func:`_quadrant_slopes`). Every term is the closed form of the
+    module notes: exact up to rounding, for the pieces :func:`coverage` takes (no ``rim``, no
+    ``mask``). The corners of every pixel are evaluated: it is meant for the fit's small crops.
+    """
+    centre = (size - 1) / 2.0
+    edges = np.arange(size + 1, dtype=np.float64) - 0.5 - centre
+    outline = aperture if isinstance(aperture, Outline) else aperture.outline(field_position)
+    boundary = _boundary(outline, scale)
+    xs, ys = edges - offset_xy[0], edges - offset_xy[1]
+    area = _area_below_left(boundary, xs, ys)
+    by_x, by_y = _quadrant_slopes(boundary, xs, ys)
+
+    def cells(f: np.ndarray) -> np.ndarray:  # rows of `f` run up in y
+        return aperture_rows_to_image(f[1:, 1:] - f[:-1, 1:] - f[1:, :-1] + f[:-1, :-1])
+
+    by_scale = (2.0 * area - xs[None, :] * by_x - ys[:, None] * by_y) / scale
+    return CoverageSlopes(np.clip(cells(area), 0.0, 1.0), -cells(by_x), -cells(by_y), cells(by_scale))
 
 
 #: Sub-pixels a side of :func:`rim_coverage` by default.

@@ -1,0 +1,171 @@
+"""What a pixel fit minimises, and its Jacobian: the model's own slopes where it has them.
+
+Notes
+-----
+The residuals of a disc are (model − data) / noise over its crop (:func:`disc_residuals`: a
+clipped pixel only where the model falls below it, the light that is not the disc's not at
+all), every disc's one after the other (:func:`weighted_residuals`).
+
+**The Jacobian** (:func:`jacobian`) is built column by column, and no column costs a render of
+every disc. A disc's centre and size move its coverage by the outline's chords on the pixel
+borders (:func:`bokehfit.fit.disc_model.profile_slopes`: exact, one pass over the crop for the
+three of them); the levels follow as the model solves them (variable projection: for a profile
+slope ∂P, the background b and plateau p re-solved to first order, so the column is the exact
+derivative of the residuals the fit sees, as a finite difference of them would be to first
+order). Finite differences, with ``scipy.optimize.least_squares``' step (10⁻⁴ of the value, at
+least 10⁻⁴, turned back inside the bounds), remain for what has no such slope: the aperture's
+shared parameters (each a render of every disc, as before), a disc's edge blur and saturated
+plateau (a blur and the levels of its own crop, its coverage reused), and the centre and size
+of a disc whose light has a ``rim`` profile (a render of that disc).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+
+import numpy as np
+from scipy.sparse import csr_matrix
+
+from bokehfit.apertures import Aperture
+from bokehfit.fit.crop import DiscCrop
+from bokehfit.fit.disc_model import (
+    SLOPED,
+    disc_profile,
+    profile_slopes,
+    render_disc_model,
+)
+from bokehfit.fit.vector import FitVector
+
+__all__ = ["DIFF_STEP", "censored_residuals", "disc_residuals", "jacobian", "weighted_residuals"]
+
+#: Relative step of a finite-difference column (``least_squares``' ``diff_step``).
+DIFF_STEP = 1e-4
+
+
+def censored_residuals(model: np.ndarray, crop: DiscCrop) -> np.ndarray:
+    """model − data; where the source is clipped only a model below the recorded value is an error;
+    where the light is not the disc's, none."""
+    residual = model - crop.data
+    if crop.censored is not None:
+        residual[crop.censored] = np.minimum(residual[crop.censored], 0.0)
+    if crop.ignored is not None:
+        residual[crop.ignored] = 0.0
+    return residual
+
+
+def _shown(aperture: Aperture, crop: DiscCrop) -> Aperture:
+    """The aperture as ``crop``'s disc shows it (turned by 180° where the disc is on the near side)."""
+    return aperture.near() if crop.turned else aperture
+
+
+def disc_residuals(aperture: Aperture, crop: DiscCrop, disc: Mapping[str, float], noise: float,
+                   covers: dict | None = None) -> np.ndarray:
+    """One disc's residuals over its noise level, ``aperture`` as the fit holds it, ``disc`` its values."""
+    model = render_disc_model(_shown(aperture, crop), disc, crop.size, crop.data, crop.field_position,
+                              crop.censored, crop.ignored, covers).model
+    return censored_residuals(model, crop) / noise
+
+
+def weighted_residuals(crops: Sequence[DiscCrop], vector: FitVector, noise: np.ndarray,
+                       covers: dict) -> Callable[[np.ndarray], np.ndarray]:
+    """What the fit minimises: every disc's residuals over its noise level, one disc after the other.
+    ``covers`` is the memo of the latest coverages (:func:`bokehfit.fit.disc_model.disc_profile`)."""
+
+    def residuals(x: np.ndarray) -> np.ndarray:
+        aperture = vector.aperture_at(x)
+        return np.concatenate([disc_residuals(aperture, c, d, s, covers)
+                               for c, d, s in zip(crops, vector.discs_at(x), noise)])
+
+    return residuals
+
+
+def _step(value: float, lower: float, upper: float) -> float:
+    """A forward difference's step as ``least_squares`` takes it: DIFF_STEP of the value (at least
+    DIFF_STEP), backwards where forwards would leave the bounds, as the float sum resolves it."""
+    h = DIFF_STEP * (1.0 if value >= 0.0 else -1.0) * max(1.0, abs(value))
+    if not lower <= value + h <= upper:
+        h = -h
+    return (value + h) - value
+
+
+def _model_slope(slope: np.ndarray, profile: np.ndarray, crop: DiscCrop, levels: tuple[float, float],
+                 fixed_plateau: bool) -> np.ndarray:
+    """∂model for a profile slope ∂P, the levels re-solved to first order as :func:`render_disc_model`
+    solves them (over the pixels neither censored nor ignored)."""
+    background, plateau = levels
+    contrast = plateau - background
+    seen = np.ones(crop.data.size, dtype=bool)
+    for mask in (crop.censored, crop.ignored):
+        if mask is not None:
+            seen &= ~mask
+    u, q, d = 1.0 - profile[seen], profile[seen], slope[seen]
+    rest = crop.data[seen] - (background * u + plateau * q)  # data − model
+    moved = contrast * d  # the model's own move, the levels held
+    if fixed_plateau:  # the background alone is solved for
+        weight = float(u @ u)
+        shift = (-(d @ rest) - u @ moved) / weight if weight > 1e-12 else 0.0
+        return contrast * slope + shift * (1.0 - profile)
+    a11, a12, a22 = float(u @ u), float(u @ q), float(q @ q)
+    det = a11 * a22 - a12 * a12
+    if abs(det) < 1e-12:
+        return contrast * slope
+    g1, g2 = -(d @ rest) - u @ moved, d @ rest - q @ moved
+    d_background, d_plateau = (a22 * g1 - a12 * g2) / det, (a11 * g2 - a12 * g1) / det
+    return contrast * slope + d_background * (1.0 - profile) + d_plateau * profile
+
+
+def _disc_columns(aperture: Aperture, crop: DiscCrop, disc: dict[str, float], noise: float, block,
+                  covers: dict) -> dict[str, np.ndarray]:
+    """One disc's own columns of the Jacobian, by name."""
+    shown = _shown(aperture, crop)
+    base = disc_residuals(aperture, crop, disc, noise, covers)
+    columns = {}
+    slopes = profile_slopes(shown, disc, crop.size, crop.field_position, covers)
+    if slopes is not None:
+        fitted = render_disc_model(shown, disc, crop.size, crop.data, crop.field_position, crop.censored,
+                                   crop.ignored, covers)
+        profile = disc_profile(shown, disc, crop.size, crop.field_position, covers).ravel().astype(np.float64)
+        live = np.ones(crop.data.size, dtype=bool)  # where the residual is the model's: not ignored, not censored above
+        if crop.ignored is not None:
+            live &= ~crop.ignored
+        if crop.censored is not None:
+            live &= ~(crop.censored & (base >= 0.0))
+        for name in SLOPED:
+            column = _model_slope(slopes[name], profile, crop, (fitted.background, fitted.plateau),
+                                  "plateau" in disc)
+            columns[name] = np.where(live, column, 0.0) / noise
+    for name, lower, upper in zip(block.names, block.lower, block.upper):
+        if name in columns:
+            continue
+        h = _step(disc[name], lower, upper)
+        moved = disc_residuals(aperture, crop, {**disc, name: disc[name] + h}, noise, covers)
+        columns[name] = (moved - base) / h
+    return columns
+
+
+def jacobian(crops: Sequence[DiscCrop], vector: FitVector, noise: np.ndarray, covers: dict,
+             sparse: bool) -> Callable[[np.ndarray], np.ndarray | csr_matrix]:
+    """The Jacobian of :func:`weighted_residuals` at a vector (the module notes); sparse (CSR) where
+    ``sparse``, as ``least_squares``' iterative solver takes it: a disc's residuals hang on the shared
+    parameters and its own alone."""
+    residuals = weighted_residuals(crops, vector, noise, covers)
+    rows = np.cumsum([0, *(c.data.size for c in crops)])
+
+    def jac(x: np.ndarray) -> np.ndarray | csr_matrix:
+        matrix = np.zeros((rows[-1], vector.size))
+        lower, upper = vector.lower, vector.upper
+        if vector.free:
+            base = residuals(x)
+            for j in range(len(vector.free)):
+                h = _step(float(x[j]), lower[j], upper[j])
+                moved = x.copy()
+                moved[j] += h
+                matrix[:, j] = (residuals(moved) - base) / h
+        aperture = vector.aperture_at(x)
+        for i, (crop, disc, block) in enumerate(zip(crops, vector.discs_at(x), vector.discs)):
+            columns = _disc_columns(aperture, crop, disc, noise[i], block, covers)
+            for k, name in enumerate(block.names):
+                matrix[rows[i] : rows[i + 1], block.at + k] = columns[name]
+        return csr_matrix(matrix) if sparse else matrix
+
+    return jac
