@@ -15,7 +15,7 @@ import pytest
 from bokehfit.apertures import make_aperture
 from bokehfit.discs import find_discs
 from bokehfit.fit.crop import crop_disc
-from bokehfit.fit.disc_model import SLOPED
+from bokehfit.fit.disc_model import SLOPED, TURN
 from bokehfit.fit.objective import jacobian, weighted_residuals
 from bokehfit.fit.vector import fit_vector
 from bokehfit.kernels.exact import coverage, coverage_slopes
@@ -90,9 +90,9 @@ HEXAGON = make_aperture("hexagon", 20.0)
 @pytest.mark.parametrize("case", ["one disc", "three discs, one overlapping", "saturated"])
 def test_the_fits_jacobian_is_that_of_its_residuals(case):
     """Away from the start (so the levels are not at their best), every column of the model's own
-    Jacobian is the central difference of the residuals: the centres' and sizes' (the slopes) to
-    1e-3 of the column, the others (forward differences themselves: the angle, the blur, the
-    plateau) to their step's order."""
+    Jacobian is the central difference of the residuals: the centres', sizes' and the angle's (the
+    slopes) to 1e-3 of the column, the others (forward differences themselves: the blur, the
+    plateau, a rim's angle and the rim) to their step's order."""
     if case == "one disc":
         crops = crops_of([SyntheticDisc((40.3, 41.6), 30.0, HEXAGON, brightness=0.6)], 80, 80)
     elif case == "saturated":
@@ -116,7 +116,8 @@ def test_the_fits_jacobian_is_that_of_its_residuals(case):
         scale = np.linalg.norm(numeric[:, j])
         assert scale > 0
         error = np.linalg.norm(exact[:, j] - numeric[:, j]) / scale
-        assert error < (1e-3 if name in SLOPED else 2e-2), (name, error)
+        sloped = name in SLOPED or (name == TURN and case != "rim")  # the model's own slopes
+        assert error < (1e-3 if sloped else 2e-2), (name, error)
     # A disc's rows hang on the shared angle and its own parameters alone.
     rows = np.cumsum([0, *(c.data.size for c in crops)])
     for i, block in enumerate(vector.discs):
@@ -124,3 +125,21 @@ def test_the_fits_jacobian_is_that_of_its_residuals(case):
         own[0] = True
         own[block.at : block.at + len(block.names)] = True
         assert not exact[rows[i] : rows[i + 1], ~own].any()
+
+
+@pytest.mark.parametrize("name", [n for n in APERTURES if APERTURES[n][1] is None and APERTURES[n][0].has_angle])
+def test_a_turn_of_the_angle_is_the_coverages_derivative(name):
+    """The outline turns (then is squeezed) with the angle: the flow's slope is the coverage's
+    derivative by the angle, in degrees."""
+    aperture, _ = APERTURES[name]
+    squeeze = aperture.squeeze_matrix()
+    flow = squeeze @ np.array([[0.0, -1.0], [1.0, 0.0]]) @ np.linalg.inv(squeeze) * (np.pi / 180.0)
+    scale, size, offset = 11.3, 36, (0.37, -0.81)
+    slopes = coverage_slopes(aperture, scale, size, offset, flow=flow)
+    numeric = central(lambda a: coverage(aperture.replace(angle_deg=a), scale, size, offset_xy=offset),
+                      aperture.angle_deg, h=1e-5)
+    assert np.abs(numeric).max() > 0.01
+    np.testing.assert_allclose(slopes.by_flow, numeric, atol=1e-7)
+    # The scale is the flow I/s: the same column two ways.
+    np.testing.assert_allclose(coverage_slopes(aperture, scale, size, offset, flow=np.eye(2) / scale).by_flow,
+                               slopes.by_scale, atol=1e-12)

@@ -98,8 +98,12 @@ def _placement(disc: Mapping[str, float], size: int) -> tuple[float, tuple[float
 
 #: A unit-area shape's scale per px of equal-area diameter: area (d·√π/2)² = π d²/4.
 SCALE_PER_DIAMETER = math.sqrt(math.pi) / 2.0
-#: The disc's parameters whose slopes :func:`profile_slopes` gives.
+#: The disc's parameters whose slopes :func:`profile_slopes` gives ...
 SLOPED = ("cx", "cy", "diameter_px")
+#: ... and the aperture's, where its outline turns whole with it (no vignetting cut).
+TURN = "angle_deg"
+#: A quarter turn: the velocity of a point p turning about the centre is J·p per radian.
+_QUARTER_TURN = np.array([[0.0, -1.0], [1.0, 0.0]])
 
 
 def profile_slopes(
@@ -109,16 +113,22 @@ def profile_slopes(
     field_position: Sequence[float] | None = None,
     covers: dict | None = None,
 ) -> dict[str, np.ndarray] | None:
-    """∂/∂cx, ∂/∂cy and ∂/∂diameter_px of :func:`disc_profile` (flattened, by name), or None where
-    the aperture's light has no closed form (a ``rim``, a ``mask``).
+    """∂/∂cx, ∂/∂cy and ∂/∂diameter_px of :func:`disc_profile` (flattened, by name), and ∂/∂angle_deg
+    where the aperture has an angle and no vignetting cut; None where the aperture's light has no
+    closed form (a ``rim``, a ``mask``).
 
     The coverage's exact slopes (:func:`bokehfit.kernels.exact.coverage_slopes`) blurred as the
-    profile is: the blur is linear. ``covers`` lends its outlines (:func:`disc_profile`)."""
+    profile is: the blur is linear. The outline is S·R(θ)·p₀ (the squeeze S after the turn), so
+    a degree of the angle moves its points by S·J·S⁻¹·p·π/180, J a quarter turn: a flow.
+    ``covers`` lends its outlines (:func:`disc_profile`)."""
     if aperture.rim != 0.0 or aperture.mask is not None:
         return None
     where = None if aperture.vignetting is None else field_position
     scale, offset_xy = _placement(disc, size)
-    slopes = coverage_slopes(_outline(aperture, where, covers), scale, size, offset_xy)
+    turns = aperture.has_angle and aperture.vignetting is None
+    squeeze = aperture.squeeze_matrix()
+    flow = squeeze @ _QUARTER_TURN @ np.linalg.inv(squeeze) * (math.pi / 180.0) if turns else None
+    slopes = coverage_slopes(_outline(aperture, where, covers), scale, size, offset_xy, flow=flow)
     # The offset is image_to_aperture of (cy − centre, cx − centre): linear, so its columns are the chain rule's.
     (by_cx,), (by_cy,) = image_to_aperture([[0.0, 1.0]]), image_to_aperture([[1.0, 0.0]])
     sigma = max(disc["blur_px"], BLUR_RANGE[0])
@@ -128,6 +138,8 @@ def profile_slopes(
         "cy": by_cy[0] * slopes.by_offset_x + by_cy[1] * slopes.by_offset_y,
         "diameter_px": sized * slopes.by_scale,
     }
+    if turns:
+        raw[TURN] = slopes.by_flow
     return {name: cv2.GaussianBlur(slope, (0, 0), sigma, borderType=cv2.BORDER_REPLICATE).ravel()
             for name, slope in raw.items()}
 

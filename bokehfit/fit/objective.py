@@ -6,15 +6,16 @@ The residuals of a disc are (model − data) / noise over its crop (:func:`disc_
 clipped pixel only where the model falls below it, the light that is not the disc's not at
 all), every disc's one after the other (:func:`weighted_residuals`).
 
-**The Jacobian** (:func:`jacobian`) is built column by column, and no column costs a render of
-every disc. A disc's centre and size move its coverage by the outline's chords on the pixel
-borders (:func:`bokehfit.fit.disc_model.profile_slopes`: exact, one pass over the crop for the
-three of them); the levels follow as the model solves them (variable projection: for a profile
+**The Jacobian** (:func:`jacobian`) is built column by column. A disc's centre and size move its coverage by the outline's chords on the pixel
+borders, and the aperture's angle by the flux of the turn through them
+(:func:`bokehfit.fit.disc_model.profile_slopes`: exact, one pass over the crop for the four of
+them); the levels follow as the model solves them (variable projection: for a profile
 slope ∂P, the background b and plateau p re-solved to first order, so the column is the exact
 derivative of the residuals the fit sees, as a finite difference of them would be to first
 order). Finite differences, with ``scipy.optimize.least_squares``' step (10⁻⁴ of the value, at
 least 10⁻⁴, turned back inside the bounds), remain for what has no such slope: the aperture's
-shared parameters (each a render of every disc, as before), a disc's edge blur and saturated
+other shared parameters, and the angle where a disc's outline does not turn whole (a vignetting
+cut, a rim; each a render of every disc, as before), a disc's edge blur and saturated
 plateau (a blur and the levels of its own crop, its coverage reused), and the centre and size
 of a disc whose light has a ``rim`` profile (a render of that disc).
 """
@@ -28,12 +29,7 @@ from scipy.sparse import csr_matrix
 
 from bokehfit.apertures import Aperture
 from bokehfit.fit.crop import DiscCrop
-from bokehfit.fit.disc_model import (
-    SLOPED,
-    disc_profile,
-    profile_slopes,
-    render_disc_model,
-)
+from bokehfit.fit.disc_model import TURN, disc_profile, profile_slopes, render_disc_model
 from bokehfit.fit.vector import FitVector
 
 __all__ = ["DIFF_STEP", "censored_residuals", "disc_residuals", "jacobian", "weighted_residuals"]
@@ -116,7 +112,8 @@ def _model_slope(slope: np.ndarray, profile: np.ndarray, crop: DiscCrop, levels:
 
 def _disc_columns(aperture: Aperture, crop: DiscCrop, disc: dict[str, float], noise: float, block,
                   covers: dict) -> dict[str, np.ndarray]:
-    """One disc's own columns of the Jacobian, by name."""
+    """One disc's own columns of the Jacobian, by name, and the shared angle's rows of it where the
+    model has its slope (:data:`~bokehfit.fit.disc_model.TURN`)."""
     shown = _shown(aperture, crop)
     base = disc_residuals(aperture, crop, disc, noise, covers)
     columns = {}
@@ -130,9 +127,8 @@ def _disc_columns(aperture: Aperture, crop: DiscCrop, disc: dict[str, float], no
             live &= ~crop.ignored
         if crop.censored is not None:
             live &= ~(crop.censored & (base >= 0.0))
-        for name in SLOPED:
-            column = _model_slope(slopes[name], profile, crop, (fitted.background, fitted.plateau),
-                                  "plateau" in disc)
+        for name, slope in slopes.items():
+            column = _model_slope(slope, profile, crop, (fitted.background, fitted.plateau), "plateau" in disc)
             columns[name] = np.where(live, column, 0.0) / noise
     for name, lower, upper in zip(block.names, block.lower, block.upper):
         if name in columns:
@@ -153,19 +149,25 @@ def jacobian(crops: Sequence[DiscCrop], vector: FitVector, noise: np.ndarray, co
 
     def jac(x: np.ndarray) -> np.ndarray | csr_matrix:
         matrix = np.zeros((rows[-1], vector.size))
-        lower, upper = vector.lower, vector.upper
-        if vector.free:
-            base = residuals(x)
-            for j in range(len(vector.free)):
-                h = _step(float(x[j]), lower[j], upper[j])
-                moved = x.copy()
-                moved[j] += h
-                matrix[:, j] = (residuals(moved) - base) / h
         aperture = vector.aperture_at(x)
+        turns = []  # each disc's rows of the angle's column, where the model has them
         for i, (crop, disc, block) in enumerate(zip(crops, vector.discs_at(x), vector.discs)):
             columns = _disc_columns(aperture, crop, disc, noise[i], block, covers)
             for k, name in enumerate(block.names):
                 matrix[rows[i] : rows[i + 1], block.at + k] = columns[name]
+            turns.append(columns.get(TURN))
+        differenced = list(range(len(vector.free)))
+        if TURN in vector.free and all(t is not None for t in turns):
+            j = vector.free.index(TURN)
+            matrix[:, j] = np.concatenate(turns)
+            differenced.remove(j)
+        if differenced:
+            base = residuals(x)
+            for j in differenced:
+                h = _step(float(x[j]), vector.lower[j], vector.upper[j])
+                moved = x.copy()
+                moved[j] += h
+                matrix[:, j] = (residuals(moved) - base) / h
         return csr_matrix(matrix) if sparse else matrix
 
     return jac

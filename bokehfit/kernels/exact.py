@@ -368,18 +368,21 @@ def coverage(
     return np.clip(aperture_rows_to_image(cells), 0.0, 1.0)  # rows of `cells` run up in y
 
 
-def _quadrant_slopes(boundary: _Boundary, xs: np.ndarray, ys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """∂F/∂X and ∂F/∂Y of the module notes on the grid ys × xs (each of shape (len(ys), len(xs))).
+def _quadrant_slopes(boundary: _Boundary, xs: np.ndarray, ys: np.ndarray) -> tuple[np.ndarray, ...]:
+    """∂F/∂X and ∂F/∂Y of the module notes, and the first moments of the same chords, on the grid
+    ys × xs (each of shape (len(ys), len(xs))).
 
     ∂F/∂X is the length of the shape on the line x = X below Y: −Σ sign · min(f(X), Y) over the
-    pieces whose span holds X. ∂F/∂Y is its length on y = Y left of X: −Σ sign · the length of
-    [x_min, clamp(X)] where f > Y, t − min(t, x*) for a piece that rises, min(t, x*) − x_min for
-    one that falls (:func:`_area_below_left`'s terms, differentiated)."""
+    pieces whose span holds X; its moment ∫ y dy over that chord is −Σ sign · ½ min(f(X), Y)².
+    ∂F/∂Y is its length on y = Y left of X: −Σ sign · the length of [x_min, clamp(X)] where f > Y,
+    t − min(t, x*) for a piece that rises, min(t, x*) − x_min for one that falls
+    (:func:`_area_below_left`'s terms, differentiated); its moment ∫ x dx is −Σ sign · ½ (t² − min(t, x*)²),
+    ½ (min(t, x*)² − x_min²) likewise."""
     shape = (len(ys), len(xs))
-    by_x, by_y = np.zeros(shape), np.zeros(shape)
+    by_x, by_y, moment_x, moment_y = (np.zeros(shape) for _ in range(4))
     count = len(boundary.segments) + len(boundary.arcs)
     if count == 0 or by_x.size == 0:
-        return by_x, by_y
+        return by_x, by_y, moment_x, moment_y
     t, c, _, _, start, _, sign, increasing = _piece_columns(boundary, xs, ys)
     sides = boundary.segments.T[:, :, None]
     left = sides[0] < sides[2]
@@ -394,9 +397,14 @@ def _quadrant_slopes(boundary: _Boundary, xs: np.ndarray, ys: np.ndarray) -> tup
         row = slice(lo, lo + step)
         y = ys[None, row, None]
         x_cross = np.minimum(t[:, None, :], c[:, row, None])
-        by_x[row] = (-sign * np.where(within[:, None, :], np.minimum(height[:, None, :], y), 0.0)).sum(axis=0)
-        by_y[row] = (-sign * np.where(rising, t[:, None, :] - x_cross, x_cross - start)).sum(axis=0)
-    return by_x, by_y
+        below = np.where(within[:, None, :], np.minimum(height[:, None, :], y), 0.0)
+        by_x[row] = (-sign * below).sum(axis=0)
+        moment_x[row] = (-sign * 0.5 * below * below).sum(axis=0)
+        tt = t[:, None, :]
+        by_y[row] = (-sign * np.where(rising, tt - x_cross, x_cross - start)).sum(axis=0)
+        moment_y[row] = (-sign * 0.5 * np.where(rising, tt * tt - x_cross * x_cross,
+                                                x_cross * x_cross - start * start)).sum(axis=0)
+    return by_x, by_y, moment_x, moment_y
 
 
 class CoverageSlopes(NamedTuple):
@@ -406,6 +414,7 @@ class CoverageSlopes(NamedTuple):
     by_offset_x: np.ndarray  #: ∂/∂ offset x (right)
     by_offset_y: np.ndarray  #: ∂/∂ offset y (up)
     by_scale: np.ndarray  #: ∂/∂ scale
+    by_flow: np.ndarray | None = None  #: ∂/∂t as the outline's points move by dp/dt = M·p (``flow`` M), if asked
 
 
 def coverage_slopes(
@@ -414,8 +423,11 @@ def coverage_slopes(
     size: int,
     offset_xy: tuple[float, float] = (0.0, 0.0),
     field_position=None,
+    flow: np.ndarray | None = None,
 ) -> CoverageSlopes:
-    """:func:`coverage` on the whole size × size grid and its exact derivatives by the offset and the scale.
+    """:func:`coverage` on the whole size × size grid and its exact derivatives by the offset and the scale,
+    and, given a 2×2 ``flow`` M, by a parameter t that moves the outline's points by dp/dt = M·p (from
+    the shape's centre: a turn of the shape, for one).
 
     Notes
     -----
@@ -423,7 +435,12 @@ def coverage_slopes(
     the offset is minus the second difference of ∂F/∂X (∂F/∂Y) over its corners: the shape's
     chords on the pixel's left and right (lower and upper) borders. The shape at scale s has
     F_s(X, Y) = s² F_1(X/s, Y/s), so ∂F_s/∂s = (2F − X ∂F/∂X − Y ∂F/∂Y) / s, X and Y taken
-    from the shape's centre (:func:`_quadrant_slopes`). Every term is the closed form of the
+    from the shape's centre (:func:`_quadrant_slopes`). A flow v = M·p changes a pixel's coverage
+    by the flux of v through the outline inside it, which is tr(M) times its coverage (the flux
+    through the boundary of its share of the shape, by the divergence theorem) less the flux of v
+    through the pixel's own borders inside the shape: on a border x = X, ∫ (M₀₀ X + M₀₁ y) dy over
+    the chord, from ∂F/∂X and its moment; on y = Y, ∫ (M₁₀ x + M₁₁ Y) dx likewise. (The scale is
+    the flow M = I/s, a shift the constant flow, and give the same columns.) Every term is the closed form of the
     module notes: exact up to rounding, for the pieces :func:`coverage` takes (no ``rim``, no
     ``mask``). The corners of every pixel are evaluated: it is meant for the fit's small crops.
     """
@@ -433,13 +450,19 @@ def coverage_slopes(
     boundary = _boundary(outline, scale)
     xs, ys = edges - offset_xy[0], edges - offset_xy[1]
     area = _area_below_left(boundary, xs, ys)
-    by_x, by_y = _quadrant_slopes(boundary, xs, ys)
+    by_x, by_y, moment_x, moment_y = _quadrant_slopes(boundary, xs, ys)
 
     def cells(f: np.ndarray) -> np.ndarray:  # rows of `f` run up in y
         return aperture_rows_to_image(f[1:, 1:] - f[:-1, 1:] - f[1:, :-1] + f[:-1, :-1])
 
     by_scale = (2.0 * area - xs[None, :] * by_x - ys[:, None] * by_y) / scale
-    return CoverageSlopes(np.clip(cells(area), 0.0, 1.0), -cells(by_x), -cells(by_y), cells(by_scale))
+    by_flow = None
+    if flow is not None:
+        (m00, m01), (m10, m11) = np.asarray(flow, dtype=np.float64)
+        across_x = m00 * xs[None, :] * by_x + m01 * moment_x  # ∫ v_x dy on x = X, below Y
+        across_y = m10 * moment_y + m11 * ys[:, None] * by_y  # ∫ v_y dx on y = Y, left of X
+        by_flow = cells((m00 + m11) * area - across_x - across_y)
+    return CoverageSlopes(np.clip(cells(area), 0.0, 1.0), -cells(by_x), -cells(by_y), cells(by_scale), by_flow)
 
 
 #: Sub-pixels a side of :func:`rim_coverage` by default.
