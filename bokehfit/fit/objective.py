@@ -6,10 +6,10 @@ The residuals of a disc are (model − data) / noise over its crop (:func:`disc_
 clipped pixel only where the model falls below it, the light that is not the disc's not at
 all), every disc's one after the other (:func:`weighted_residuals`).
 
-**The Jacobian** (:func:`jacobian`) is built column by column. A disc's centre and size move its coverage by the outline's chords on the pixel
-borders, and the aperture's angle by the flux of the turn through them
-(:func:`bokehfit.fit.disc_model.profile_slopes`: exact, one pass over the crop for the four of
-them); the levels follow as the model solves them (variable projection: for a profile
+**The Jacobian** (:func:`jacobian`) is built column by column. A disc's centre and size move
+its coverage by the outline's chords on the pixel borders, and the aperture's angle by the flux
+of the turn through them (:func:`bokehfit.fit.disc_model.profile_slopes`: exact, one pass over
+the crop for the four of them); the levels follow as the model solves them (variable projection: for a profile
 slope ∂P, the background b and plateau p re-solved to first order, so the column is the exact
 derivative of the residuals the fit sees, as a finite difference of them would be to first
 order). Finite differences, with ``scipy.optimize.least_squares``' step (10⁻⁴ of the value, at
@@ -30,7 +30,7 @@ from scipy.sparse import csr_matrix
 from bokehfit.apertures import Aperture
 from bokehfit.fit.crop import DiscCrop
 from bokehfit.fit.disc_model import TURN, disc_profile, profile_slopes, render_disc_model
-from bokehfit.fit.vector import FitVector
+from bokehfit.fit.vector import Block, FitVector
 
 __all__ = ["DIFF_STEP", "censored_residuals", "disc_residuals", "jacobian", "weighted_residuals"]
 
@@ -110,7 +110,7 @@ def _model_slope(slope: np.ndarray, profile: np.ndarray, crop: DiscCrop, levels:
     return contrast * slope + d_background * (1.0 - profile) + d_plateau * profile
 
 
-def _disc_columns(aperture: Aperture, crop: DiscCrop, disc: dict[str, float], noise: float, block,
+def _disc_columns(aperture: Aperture, crop: DiscCrop, disc: dict[str, float], noise: float, block: Block,
                   covers: dict) -> dict[str, np.ndarray]:
     """One disc's own columns of the Jacobian, by name, and the shared angle's rows of it where the
     model has its slope (:data:`~bokehfit.fit.disc_model.TURN`)."""
