@@ -34,6 +34,7 @@ __all__ = [
     "BLUR_RANGE",
     "DiscModel",
     "disc_profile",
+    "level_pixels",
     "model_window",
     "profile_slopes",
     "render_disc_model",
@@ -54,6 +55,7 @@ class DiscModel(NamedTuple):
     model: np.ndarray  #: flattened, the crop's size
     background: float
     plateau: float
+    profile: np.ndarray  #: the blurred unit-contrast disc it is made of (:func:`disc_profile`), flattened
 
 
 def disc_profile(
@@ -133,11 +135,9 @@ def profile_slopes(
     (by_cx,), (by_cy,) = image_to_aperture([[0.0, 1.0]]), image_to_aperture([[1.0, 0.0]])
     sigma = max(disc["blur_px"], BLUR_RANGE[0])
     sized = SCALE_PER_DIAMETER if disc["diameter_px"] > 1e-3 else 0.0
-    raw = {
-        "cx": by_cx[0] * slopes.by_offset_x + by_cx[1] * slopes.by_offset_y,
-        "cy": by_cy[0] * slopes.by_offset_x + by_cy[1] * slopes.by_offset_y,
-        "diameter_px": sized * slopes.by_scale,
-    }
+    raw = dict(zip(SLOPED, (by_cx[0] * slopes.by_offset_x + by_cx[1] * slopes.by_offset_y,
+                            by_cy[0] * slopes.by_offset_x + by_cy[1] * slopes.by_offset_y,
+                            sized * slopes.by_scale)))
     if turns:
         raw[TURN] = slopes.by_flow
     return {name: cv2.GaussianBlur(slope, (0, 0), sigma, borderType=cv2.BORDER_REPLICATE).ravel()
@@ -200,20 +200,22 @@ def render_disc_model(
     and only the background is solved for. ``covers``: see :func:`disc_profile`.
     """
     profile = disc_profile(aperture, disc, size, field_position, covers).ravel().astype(np.float64)
-    seen = slice(None)
-    if censored is not None or ignored is not None:
-        seen = ~(_or(censored, ignored))
+    seen = level_pixels(censored, ignored)
     if "plateau" in disc:
         plateau = disc["plateau"]
         background = _background(profile[seen], data[seen], plateau)
     else:
         background, plateau = _levels(profile[seen], data[seen])
-    return DiscModel(model=background + (plateau - background) * profile, background=background, plateau=plateau)
+    return DiscModel(model=background + (plateau - background) * profile, background=background, plateau=plateau,
+                     profile=profile)
 
 
-def _or(a: np.ndarray | None, b: np.ndarray | None) -> np.ndarray:
-    """``a | b`` of two optional masks (one of them given)."""
-    return b if a is None else a if b is None else a | b
+def level_pixels(censored: np.ndarray | None, ignored: np.ndarray | None) -> np.ndarray | slice:
+    """The pixels a crop's levels are solved over: neither censored nor ignored (all of them where
+    neither mask is given)."""
+    if censored is None and ignored is None:
+        return slice(None)
+    return ~(ignored if censored is None else censored if ignored is None else censored | ignored)
 
 
 def model_window(fit: PixelFit, left: int, top: int, size: int) -> np.ndarray:

@@ -88,8 +88,8 @@ def _rim_signal(crop: DiscCrop, fit: PixelFit) -> float | None:
     if crop.censored is not None or fit.diameter_px / crop.factor < RIM_MIN_DIAMETER_PX / 2:
         return None
     values = crop.values_of(fit)
-    model, background, plateau = render_disc_model(fit.aperture, values, crop.size, crop.data, crop.field_position,
-                                                   ignored=crop.ignored)
+    model, background, plateau, _ = render_disc_model(fit.aperture, values, crop.size, crop.data,
+                                                      crop.field_position, ignored=crop.ignored)
     rows, cols = np.indices((crop.size, crop.size))
     radius = np.hypot(cols - values["cx"], rows - values["cy"]).ravel() / (0.5 * values["diameter_px"])
     if crop.ignored is not None:

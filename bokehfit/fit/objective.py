@@ -29,7 +29,7 @@ from scipy.sparse import csr_matrix
 
 from bokehfit.apertures import Aperture
 from bokehfit.fit.crop import DiscCrop
-from bokehfit.fit.disc_model import TURN, disc_profile, profile_slopes, render_disc_model
+from bokehfit.fit.disc_model import TURN, level_pixels, profile_slopes, render_disc_model
 from bokehfit.fit.vector import Block, FitVector
 
 __all__ = ["DIFF_STEP", "censored_residuals", "disc_residuals", "jacobian", "weighted_residuals"]
@@ -90,10 +90,7 @@ def _model_slope(slope: np.ndarray, profile: np.ndarray, crop: DiscCrop, levels:
     solves them (over the pixels neither censored nor ignored)."""
     background, plateau = levels
     contrast = plateau - background
-    seen = np.ones(crop.data.size, dtype=bool)
-    for mask in (crop.censored, crop.ignored):
-        if mask is not None:
-            seen &= ~mask
+    seen = level_pixels(crop.censored, crop.ignored)
     u, q, d = 1.0 - profile[seen], profile[seen], slope[seen]
     rest = crop.data[seen] - (background * u + plateau * q)  # data − model
     moved = contrast * d  # the model's own move, the levels held
@@ -115,20 +112,19 @@ def _disc_columns(aperture: Aperture, crop: DiscCrop, disc: dict[str, float], no
     """One disc's own columns of the Jacobian, by name, and the shared angle's rows of it where the
     model has its slope (:data:`~bokehfit.fit.disc_model.TURN`)."""
     shown = _shown(aperture, crop)
-    base = disc_residuals(aperture, crop, disc, noise, covers)
+    fitted = render_disc_model(shown, disc, crop.size, crop.data, crop.field_position, crop.censored, crop.ignored,
+                               covers)
+    base = censored_residuals(fitted.model, crop) / noise
     columns = {}
     slopes = profile_slopes(shown, disc, crop.size, crop.field_position, covers)
     if slopes is not None:
-        fitted = render_disc_model(shown, disc, crop.size, crop.data, crop.field_position, crop.censored,
-                                   crop.ignored, covers)
-        profile = disc_profile(shown, disc, crop.size, crop.field_position, covers).ravel().astype(np.float64)
         live = np.ones(crop.data.size, dtype=bool)  # where the residual is the model's: not ignored, not censored above
         if crop.ignored is not None:
             live &= ~crop.ignored
         if crop.censored is not None:
             live &= ~(crop.censored & (base >= 0.0))
         for name, slope in slopes.items():
-            column = _model_slope(slope, profile, crop, (fitted.background, fitted.plateau), "plateau" in disc)
+            column = _model_slope(slope, fitted.profile, crop, (fitted.background, fitted.plateau), "plateau" in disc)
             columns[name] = np.where(live, column, 0.0) / noise
     for name, lower, upper in zip(block.names, block.lower, block.upper):
         if name in columns:
