@@ -174,7 +174,7 @@ _SIDE_CHUNK = 2**18
 def _piece_columns(boundary: _Boundary, xs: np.ndarray, ys: np.ndarray):
     """Everything of F that hangs on X alone or on Y alone, for every piece (sides, then arc pieces):
     t = X clamped to the piece, its integral H(t), the crossing x*(Y) and H(x*), with each piece's
-    left end, H there, sign and whether f rises."""
+    left end, H there, sign and whether f rises; last, f(t), the piece's height at t."""
     sides, arcs = boundary.segments, boundary.arcs
     x0, y0, x1, y1 = sides.T[:, :, None]
     left = x0 < x1
@@ -200,7 +200,8 @@ def _piece_columns(boundary: _Boundary, xs: np.ndarray, ys: np.ndarray):
     h_start = np.concatenate([np.zeros_like(xa), _arc_integral(columns, x_min)])[:, :, None]
     sign = np.concatenate([np.where(left, 1.0, -1.0), columns[15]])[:, :, None]
     increasing = np.concatenate([(slope >= 0.0).ravel(), columns[16].ravel() > 0.0])
-    return t, c, h_t, h_c, start, h_start, sign, increasing
+    height = np.concatenate([ya + slope * (side_t - xa), _arc_height(columns, arc_t)])
+    return t, c, h_t, h_c, start, h_start, sign, increasing, height
 
 
 def _area_below_left(boundary: _Boundary, xs: np.ndarray, ys: np.ndarray,
@@ -220,7 +221,7 @@ def _area_below_left(boundary: _Boundary, xs: np.ndarray, ys: np.ndarray,
     count = len(boundary.segments) + len(boundary.arcs)
     if count == 0 or total.size == 0:
         return total
-    t, c, h_t, h_c, start, h_start, sign, increasing = _piece_columns(boundary, xs, ys)
+    t, c, h_t, h_c, start, h_start, sign, increasing, _ = _piece_columns(boundary, xs, ys)
     rising, falling = np.flatnonzero(increasing), np.flatnonzero(~increasing)
     if grid:
         step = max(1, _SIDE_CHUNK // (count * max(len(xs), 1)))
@@ -383,13 +384,7 @@ def _quadrant_slopes(boundary: _Boundary, xs: np.ndarray, ys: np.ndarray) -> tup
     count = len(boundary.segments) + len(boundary.arcs)
     if count == 0 or by_x.size == 0:
         return by_x, by_y, moment_x, moment_y
-    t, c, _, _, start, _, sign, increasing = _piece_columns(boundary, xs, ys)
-    sides = boundary.segments.T[:, :, None]
-    left = sides[0] < sides[2]
-    xa, ya = np.where(left, sides[0], sides[2]), np.where(left, sides[1], sides[3])
-    slope = (np.where(left, sides[3], sides[1]) - ya) / np.abs(sides[2] - sides[0])
-    height = np.concatenate([ya + slope * (t[: len(sides[0])] - xa),
-                             _arc_height(boundary.arcs.T[:, :, None], t[len(sides[0]) :])])
+    t, c, _, _, start, _, sign, increasing, height = _piece_columns(boundary, xs, ys)
     within = (t > start[:, :, 0]) & (t == xs[None, :])  # X strictly inside the piece's span
     rising = increasing[:, None, None]
     step = max(1, _SIDE_CHUNK // (count * max(len(xs), 1)))
@@ -439,10 +434,10 @@ def coverage_slopes(
     by the flux of v through the outline inside it, which is tr(M) times its coverage (the flux
     through the boundary of its share of the shape, by the divergence theorem) less the flux of v
     through the pixel's own borders inside the shape: on a border x = X, ∫ (M₀₀ X + M₀₁ y) dy over
-    the chord, from ∂F/∂X and its moment; on y = Y, ∫ (M₁₀ x + M₁₁ Y) dx likewise. (The scale is
-    the flow M = I/s, a shift the constant flow, and give the same columns.) Every term is the closed form of the
-    module notes: exact up to rounding, for the pieces :func:`coverage` takes (no ``rim``, no
-    ``mask``). The corners of every pixel are evaluated: it is meant for the fit's small crops.
+    the chord, from ∂F/∂X and its moment; on y = Y, ∫ (M₁₀ x + M₁₁ Y) dx likewise (the scale is
+    the flow M = I/s, and gives the same column). Every term is the closed form of the module
+    notes: exact up to rounding, for the pieces :func:`coverage` takes (no ``rim``, no ``mask``).
+    The corners of every pixel are evaluated: it is meant for the fit's small crops.
     """
     centre = (size - 1) / 2.0
     edges = np.arange(size + 1, dtype=np.float64) - 0.5 - centre
