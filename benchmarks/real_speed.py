@@ -23,7 +23,7 @@ per-family fits summed, joint, features, the rest). ``--json`` also keeps each p
 with the rim profile: ``bokehfit.fit.disc_model``'s calls of ``coverage`` and ``rim_coverage``)
 and how many of them are taken for the Jacobian (scipy's finite differences, or the fit's own
 Jacobian, on the stack); where the tree has them, also the exact coverages with their slopes
-(``coverage_slopes``) that the fit's own Jacobian takes for a disc's centre and size.
+(``coverage_slopes``) that the fit's own Jacobian takes for a disc's centre, size and angle.
 """
 
 from __future__ import annotations
