@@ -26,6 +26,7 @@ from bokehfit import __version__
 from bokehfit.cli import bench, compare, discs, kernel, render, similarity, survey, view
 from bokehfit.errors import BokehfitError, InputError
 from bokehfit.gpu import BACKENDS, AdapterChoice
+from bokehfit.threads import one_thread
 
 __all__ = ["main", "entry_point", "build_parser", "adapter_from_environment", "ADAPTER_ENV", "BACKEND_ENV"]
 
@@ -112,10 +113,12 @@ def entry_point() -> None:
     """Console entry point: one-line messages and exit codes, never a traceback.
 
     Warnings are printed as one line while the command runs; the process's
-    warning handler and filters are restored afterwards (also on exit).
+    warning handler and filters are restored afterwards (also on exit). BLAS and
+    OpenMP run on one thread meanwhile, unless the environment sizes them
+    (:func:`bokehfit.threads.one_thread`).
     """
     _unencodable_text_escaped()
-    with warnings.catch_warnings():
+    with warnings.catch_warnings(), one_thread():
         warnings.showwarning = _show_warning_one_line
         _run_with_exit_codes()
 

@@ -17,6 +17,8 @@ import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from bokehfit.threads import SINGLE_THREAD_VARIABLES
+
 __all__ = [
     "PhotoTask",
     "FAILURE_STATUSES",
@@ -59,14 +61,11 @@ class PhotoTask:
     timeout_s: float | None = None
 
 
-#: Thread pools of one thread in every worker: OpenMP and BLAS (the OpenBLAS of NumPy and of SciPy,
-#: MKL), whose sizes are read from the environment as each library loads. The fit's matrices are
-#: small: a second OpenBLAS thread does none of the work and spins beside the worker (on a 512×384
-#: photo, 3 to 17 % more CPU time, the more so the idler the machine), and OpenBLAS's sums depend
-#: on its thread count (in the last digits), so at one a photo's numbers depend neither on the
-#: machine's cores, nor on ``--jobs``, nor on Dask (whose nanny starts its workers with these
-#: three at 1 too).
-SINGLE_THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+# Thread pools of one thread in every worker (:mod:`bokehfit.threads`: SINGLE_THREAD_VARIABLES): a
+# second OpenBLAS thread does none of the fit's work and spins beside the worker (on a 512×384
+# photo, 3 to 17 % more CPU time, the more so the idler the machine), and at one a photo's numbers
+# depend neither on the machine's cores, nor on ``--jobs``, nor on Dask (whose nanny starts its
+# workers with these three at 1 too).
 #: Thread pools sized to a worker's share of the cores: OpenCV's and lavapipe's (the CPU Vulkan
 #: driver); each starts a thread per core by default, so N workers on N cores would start N times
 #: as many as there are cores. Their results do not depend on the count.
