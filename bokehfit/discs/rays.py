@@ -48,7 +48,7 @@ import numpy as np
 from scipy import ndimage
 
 from bokehfit.discs.contours import polygon_area_centroid
-from bokehfit.discs.levels import Levels, Window
+from bokehfit.discs.levels import Levels, Window, _median
 from bokehfit.discs.outlines import Outlined
 from bokehfit.discs.reasons import NoDisc, Reason
 from bokehfit.discs.verdict import Measurement, describe
@@ -171,14 +171,14 @@ class _Rays:
         row = self.profile[k]
         framed = bool(self.inside[k, lo : hi + 1].all())
         farther = row[hi : hi + self.side + 1]
-        return (float(np.median(row[lo : j - self.gap + 1])), float(np.median(row[j + self.gap : hi + 1])),
-                float(np.median(farther)) if len(farther) else math.nan, framed)
+        return (float(_median(row[lo : j - self.gap + 1])), float(_median(row[j + self.gap : hi + 1])),
+                float(_median(farther)) if len(farther) else math.nan, framed)
 
     def plateau(self, k: int, j: int) -> float:
         """The light of ray ``k`` inside radial index ``j``, from PLATEAU_FROM of the way out to the step's
         inner side (median): a disc's plateau or rim, where a glow or a cone keeps rising inwards."""
         lo = int(PLATEAU_FROM * j)
-        return float(np.median(self.profile[k, lo : max(lo + 1, j - self.gap + 1)]))
+        return float(_median(self.profile[k, lo : max(lo + 1, j - self.gap + 1)]))
 
     def sigma(self, j: int) -> float:
         """The noise of a step at radial index ``j``: the pixel noise over the pixels each side averages
@@ -291,11 +291,11 @@ def _trace(crop, centre_rc, radius, noise) -> tuple[np.ndarray, np.ndarray, Leve
     at = np.clip(np.round(edge / rays.step).astype(int), 1, len(rays.radii) - 2)
     falls, rises = [], []
     for k in np.nonzero(on)[0]:
-        near_inside = float(np.median(rays.profile[k, max(0, at[k] - rays.gap - rays.side) : at[k] - rays.gap + 1]))
+        near_inside = float(_median(rays.profile[k, max(0, at[k] - rays.gap - rays.side) : at[k] - rays.gap + 1]))
         step_k = max(near_inside - outer[k], 1e-12)
         steepest = float(rays.slope[k, max(0, at[k] - rays.gap) : at[k] + rays.gap + 1].min())
         falls.append(step_k / max(-steepest, 1e-12))
-        rises.append((float(np.median(rays.profile[k, : max(1, int(RISE_CORE * at[k]))])) - near_inside) / step_k)
+        rises.append((float(_median(rays.profile[k, : max(1, int(RISE_CORE * at[k]))])) - near_inside) / step_k)
     if float(np.median(falls)) > MAX_RAMP_SHARE * (2 * rays.gap + rays.side) * rays.step or float(np.median(rises)) > MAX_RISE:
         return NoDisc(Reason.SOFT_EDGE)
     edge = _fill(rays.angles, edge, on)
