@@ -1,11 +1,12 @@
 """The thread pools of numerical libraries: BLAS and OpenMP on one thread for bokehfit's own work.
 
 The fit's matrices are small (a few dozen columns, a few thousand rows): a BLAS thread pool does
-none of the work in parallel, and its idle threads spin beside the one that does. On a machine of
-16 cores ``bokehfit compare`` took 2.5 to 3.5 times as much CPU time as wall time, and the 17
-reference photos 9 % more wall time, with OpenBLAS's default pool of one thread per core
-(``benchmarks/RESULTS.md``). OpenBLAS's sums also depend on its thread count in their last digits,
-so at one thread a photo's numbers do not depend on the machine's cores.
+none of the work in parallel, and OpenBLAS's sums depend on its thread count in their last digits.
+At one thread a photo's numbers do not depend on the machine's cores, ``--jobs`` or Dask, and no
+idle BLAS thread spins beside the one that works. Measured on a 16-core machine
+(``benchmarks/cli_threads.py``, ``benchmarks/RESULTS.md``): the 17 reference photos took 5 % less
+CPU time this way than with OpenBLAS's default pool of a thread per core, the same wall time, and
+the same answers.
 
 Two ways in, one rule: a process started for bokehfit's work (a survey's worker) is given
 :data:`SINGLE_THREAD_VARIABLES` at 1 before it loads NumPy (:mod:`bokehfit.surveys.work`); the
