@@ -132,6 +132,7 @@ def fit_discs(
     free: Sequence[str] | None = None,
     noise: Sequence[float] | None = None,
     disc_starts: Sequence[Mapping[str, float]] | None = None,
+    tolerance: float = TOLERANCE,
 ) -> JointFit:
     """Least-squares fit of ``crops`` sharing one aperture.
 
@@ -139,12 +140,13 @@ def fit_discs(
     of ``start``'s :attr:`~bokehfit.apertures.Aperture.parameters`), then each
     disc's :data:`~bokehfit.fit.vector.DISC_NAMES` (and plateau where it is saturated). ``noise``
     (one per crop, default 1) divides each disc's residuals. ``disc_starts``
-    (crop units) replace the outline's starting values where given.
+    (crop units) replace the outline's starting values where given. The fit stops where a step
+    changes the cost or the parameters by less than ``tolerance`` of them (scipy's ftol and xtol).
     """
     free = tuple(start.parameters) if free is None else tuple(free)
     noise = np.ones(len(crops)) if noise is None else np.maximum(np.asarray(noise, dtype=np.float64), 1e-12)
     vector = fit_vector(crops, start, free, disc_starts)
-    result = _solve(crops, vector, noise)
+    result = _solve(crops, vector, noise, tolerance)
     aperture = vector.wrapped_at(result.x)
     evidence = _evidence(result, crops, vector)
     fits = [
@@ -162,7 +164,7 @@ def fit_discs(
     )
 
 
-def _solve(crops: Sequence[DiscCrop], vector: FitVector, noise: np.ndarray) -> OptimizeResult:
+def _solve(crops: Sequence[DiscCrop], vector: FitVector, noise: np.ndarray, tolerance: float = TOLERANCE) -> OptimizeResult:
     """Bounded least squares (trust-region reflective) from the vector's start, with the model's own
     Jacobian (:func:`bokehfit.fit.objective.jacobian`)."""
     covers: dict = {}  # the coverages of the last steps (disc_profile)
@@ -175,8 +177,8 @@ def _solve(crops: Sequence[DiscCrop], vector: FitVector, noise: np.ndarray) -> O
         method="trf",
         x_scale="jac",
         max_nfev=MAX_EVALUATIONS,
-        ftol=TOLERANCE,
-        xtol=TOLERANCE,
+        ftol=tolerance,
+        xtol=tolerance,
         tr_solver="lsmr" if sparse else "exact",
     )
 

@@ -32,6 +32,7 @@ from bokehfit.fit.choice import choose_discs, slit_aspect
 from bokehfit.fit.families import FAMILIES, Family
 from bokehfit.fit.features import FEATURE_DELTA_BIC, add_feature, at_bound, features_to_test
 from bokehfit.fit.crop import DiscCrop, crop_disc
+from bokehfit.fit.crop import MAX_FIT_SIDE
 from bokehfit.fit.pixels import JointFit, PixelFit, fit_discs
 from bokehfit.fit.result import CandidateModel, DiscFit, FitOptions
 from bokehfit.fit.signature import Screen, screen
@@ -52,6 +53,14 @@ ROUNDNESS_MIN_DIAMETER_PX = 16.0
 OUTLINE_SUPPORT_SHARE = 0.75
 #: Most discs fitted jointly (the clearest first): the shared parameters are settled well before.
 JOINT_DISCS = 8
+#: A family's trial fit on a model disc (stage 3) stops where a step changes its cost or parameters by
+#: less than this share (scipy's ftol and xtol): the trials only rank the families, by BIC =
+#: n·ln(RSS/n) + k·ln(n), which a relative change δ of the cost moves by n·δ, at most
+#: MAX_FIT_SIDE² · 1e-4 = 0.13 on a crop (the choices it makes are 10 or more apart). A family whose
+#: shape the disc does not show (a hexagon on a round disc, its angle free to turn) otherwise crawls
+#: along the flat valley of its angle for a hundred steps, each a millionth better. The winner's
+#: trials are then carried on to the fit's own tolerance (:func:`fit_winner`).
+TRIAL_TOLERANCE = 1e-4
 
 
 class Clock:
@@ -160,14 +169,14 @@ def _fit_start(aperture: Aperture) -> Aperture:
 def fit_families(chosen: Chosen, screened: Screened, options: FitOptions,
                  progress: Callable[[int, int], None] | None, clock: Clock) -> list[DiscFit]:
     """Stage 3: each candidate family fitted alone to each of the first ``options.model_discs`` discs
-    (timed by family), from its screen's aperture."""
+    (timed by family), from its screen's aperture, to TRIAL_TOLERANCE."""
     trials = []
     for i, (disc, crop, disc_screens, found) in enumerate(
         zip(chosen.discs[: options.model_discs], screened.crops, screened.screens, screened.by_family)
     ):
         fits = {}
         for g in screened.candidates:
-            fits[g.name] = fit_discs([crop], g, _fit_start(found[g].aperture)).fits[0]
+            fits[g.name] = fit_discs([crop], g, _fit_start(found[g].aperture), tolerance=TRIAL_TOLERANCE).fits[0]
             clock(f"family {g.name}")
         trials.append(DiscFit(disc, disc_screens, fits))
         if progress is not None:
@@ -210,8 +219,12 @@ def select_model(trials: list[DiscFit], screened: Screened) -> Selection:
 
 def fit_winner(chosen: Chosen, screened: Screened, trials: list[DiscFit], winner: Family, options: FitOptions,
                progress: Callable[[int, int], None] | None) -> list[DiscFit]:
-    """Stage 5: every chosen disc's fits: ``trials``, then the winner alone on each disc after the model discs."""
-    disc_fits = list(trials)
+    """Stage 5: every chosen disc's fits: ``trials``, the winner's carried on from where its trial stopped
+    (TRIAL_TOLERANCE) to the fit's own tolerance, then the winner alone on each disc after the model discs."""
+    disc_fits = [
+        dataclasses.replace(item, fits={**item.fits, winner.name: _carried_on(crop, winner, item.fits[winner.name])})
+        for item, crop in zip(trials, screened.crops)
+    ]
     start = options.model_discs
     for i, (disc, crop, disc_screens, found) in enumerate(
         zip(chosen.discs[start:], screened.crops[start:], screened.screens[start:], screened.by_family[start:]), start
@@ -221,6 +234,11 @@ def fit_winner(chosen: Chosen, screened: Screened, trials: list[DiscFit], winner
         if progress is not None:
             progress(i + 1, len(chosen.discs))
     return disc_fits
+
+
+def _carried_on(crop: DiscCrop, family: Family, trial: PixelFit) -> PixelFit:
+    """``family``'s trial fit of a disc carried on to the fit's own tolerance, from where it stopped."""
+    return fit_discs([crop], family, trial.aperture, disc_starts=[crop.values_of(trial)]).fits[0]
 
 
 @dataclass(frozen=True)
