@@ -480,3 +480,24 @@ def test_bad_input_names_the_parameter(call, name):
         call()
     assert isinstance(raised.value, ValueError)
     assert str(raised.value).startswith(f"{name} "), str(raised.value)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_distance_to_an_outline_against_its_near_sides_is_the_distance_against_all(seed):
+    """DistanceToOutline measures each point against the sides that can be nearest only: the same
+    numbers as against every side, on wavy outlines of many sides, with a few long sides (which
+    make the pruning keep more) and points inside, on and far outside."""
+    from bokehfit.metrics.outlines import DistanceToOutline
+
+    rng = np.random.default_rng(seed)
+    count = int(rng.integers(100, 900))
+    angles = np.sort(rng.uniform(0.0, 2.0 * np.pi, count))
+    radius = 1.0 + 0.3 * np.sin(int(rng.integers(1, 9)) * angles) + rng.uniform(0.0, 0.05, count)
+    target = np.column_stack([radius * np.cos(angles), radius * np.sin(angles)])
+    if seed % 2:
+        target = np.vstack([target[: count // 2], target[-3:]])  # a chord across: a few long sides
+    points = np.vstack([rng.uniform(-2.0, 2.0, (500, 2)), target[::7], 10.0 * rng.normal(size=(20, 2))])
+    distance_to = DistanceToOutline(target)
+    assert len(target) > DistanceToOutline.ALL_SIDES_UP_TO  # the pruned path is the one tested
+    every_side = distance_to.to_sides(points[:, 0, None], points[:, 1, None]).min(axis=1)
+    np.testing.assert_array_equal(distance_to(points), every_side)

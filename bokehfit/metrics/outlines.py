@@ -303,10 +303,20 @@ def _scanline_crossings(mids, x0, y0, y1, slope, tag):
 
 
 class DistanceToOutline:
-    """Distances from points to the nearest point of a closed outline (its sides, not only its vertices)."""
+    """Distances from points to the nearest point of a closed outline (its sides, not only its vertices).
+
+    :meth:`__call__` measures each point against the sides that can be its nearest only: a side
+    whose midpoint lies farther from the point than the nearest midpoint does, by more than the
+    longest half-side, is farther than that midpoint (a point of a side is within half its
+    length of its midpoint). Among the sides kept is always the nearest, so the distance is the
+    same number as against every side, at a few sides a point on a densely sampled outline
+    instead of all of them.
+    """
 
     #: Point-side pairs evaluated at once by :meth:`__call__` (bounds its memory: ~16 MiB of float64 temporaries).
     PAIRS_PER_CHUNK = 2**18
+    #: Outlines of at most this many sides are measured against every side (the search costs more).
+    ALL_SIDES_UP_TO = 64
 
     def __init__(self, outline: np.ndarray):
         self.start = np.asarray(outline, dtype=np.float64)
@@ -315,6 +325,7 @@ class DistanceToOutline:
         # A zero-length side (a repeated point) is its start point: its t is 0.
         self._inverse_length_sq = np.divide(1.0, self.length_sq, out=np.zeros_like(self.length_sq),
                                             where=self.length_sq > 0.0)
+        self._middles = None  # (KD-tree of the sides' midpoints, the longest half-side), made on first use
 
     def to_sides(self, x: np.ndarray, y: np.ndarray, sides=slice(None)) -> np.ndarray:
         """Distance from the points (x, y) to the sides ``sides`` (indices), broadcast together."""
@@ -326,6 +337,25 @@ class DistanceToOutline:
 
     def __call__(self, points: np.ndarray) -> np.ndarray:
         points = np.atleast_2d(np.asarray(points, dtype=np.float64))
+        if len(self.start) <= self.ALL_SIDES_UP_TO:
+            return self._to_all_sides(points)
+        if self._middles is None:
+            from scipy.spatial import cKDTree
+
+            self._middles = (cKDTree(self.start + 0.5 * self.side), 0.5 * math.sqrt(float(self.length_sq.max())))
+        tree, longest_half = self._middles
+        nearest_middle, _ = tree.query(points)
+        # The nearest midpoint is on its side: the nearest side lies within it plus the longest half-side.
+        near = tree.query_ball_point(points, nearest_middle * (1.0 + 1e-12) + longest_half + 1e-12, return_sorted=False)
+        counts = np.fromiter((len(sides) for sides in near), dtype=np.intp, count=len(points))
+        if counts.sum() >= len(points) * len(self.start) // 2:  # the outline's sides are too long to prune
+            return self._to_all_sides(points)
+        sides = np.fromiter((side for found in near for side in found), dtype=np.intp, count=int(counts.sum()))
+        owner = np.repeat(np.arange(len(points)), counts)
+        distances = self.to_sides(points[owner, 0], points[owner, 1], sides)
+        return np.minimum.reduceat(distances, np.cumsum(counts) - counts)
+
+    def _to_all_sides(self, points: np.ndarray) -> np.ndarray:
         result = np.empty(len(points))
         chunk = max(1, self.PAIRS_PER_CHUNK // len(self.start))
         for first in range(0, len(points), chunk):
