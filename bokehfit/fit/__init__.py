@@ -13,7 +13,9 @@ The steps (design.md §8, the simplest model the data supports):
    signature (:mod:`bokehfit.fit.signature`); the ``FitOptions.shortlist`` families with
    the lowest mean misfit, and always the circle, go on to the pixel fit.
 3. **Fit.** Each shortlisted family is fitted to the pixels of the first
-   ``FitOptions.model_discs`` discs (:mod:`bokehfit.fit.pixels`).
+   ``FitOptions.model_discs`` discs (:mod:`bokehfit.fit.pixels`), to the tolerance that
+   ranking them by BIC needs (``stages.TRIAL_TOLERANCE``); the winner's fits are then
+   carried on to the fit's own.
 4. **Select.** The family with the lowest total BIC over those discs wins
    (BIC = n·ln(RSS/n) + k·ln(n) per disc): a round disc is a circle, not a
    12-gon, because the 12-gon's extra parameters buy no lower residual.
