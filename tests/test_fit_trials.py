@@ -65,3 +65,30 @@ def test_the_winners_trials_are_carried_on_to_the_fits_own_tolerance():
     rough = [item.fits[hexagon.name] for item in trials]
     assert any(abs(r.angle_deg - c.fits[hexagon.name].angle_deg) > 0.01 or abs(r.diameter_px - c.fits[hexagon.name].diameter_px) > 0.01
                for r, c in zip(rough, carried))  # the loose trials were somewhere else: the check has something to check
+
+
+@pytest.mark.parametrize("roundness, rounded_fitted", [(0.0, False), (1.0, False), (0.5, True)])
+def test_rounded_blades_are_fitted_where_the_outlines_show_blades_rounder_than_straight_and_not_round(
+        roundness, rounded_fitted):
+    """A rounded hexagon is a candidate where some outline fits it better than both the straight
+    hexagon and the circle (the rounded family at roundness 1): round discs (a circle, or a hexagon
+    rounded all the way) and straight hexagons need no roundness; blades rounded half way do."""
+    from bokehfit.fit import fit_aperture
+
+    discs = [SyntheticDisc((60.0 + 100.0 * i, 70.0), 48.0, make_aperture("hexagon", 12.0, roundness=roundness))
+             for i in range(3)]
+    luminance = render_discs(320, 140, discs, noise_sigma=0.005, seed=5)
+    fit = fit_aperture(luminance, find_discs(luminance).discs, shapes=["circle", "hexagon"])
+    names = {candidate.family.name for candidate in fit.candidates}
+    assert "hexagon" in names and "circle" in names
+    assert ("hexagon+roundness" in names) == rounded_fitted, names
+
+
+def test_without_the_circle_among_the_shapes_the_rounding_is_weighed_against_the_straight_blades():
+    from bokehfit.fit import fit_aperture
+
+    discs = [SyntheticDisc((60.0 + 100.0 * i, 70.0), 48.0, make_aperture("hexagon", 12.0, roundness=0.5))
+             for i in range(3)]
+    luminance = render_discs(320, 140, discs, noise_sigma=0.005, seed=5)
+    fit = fit_aperture(luminance, find_discs(luminance).discs, shapes=["hexagon"])
+    assert {candidate.family.name for candidate in fit.candidates} == {"hexagon", "hexagon+roundness"}
