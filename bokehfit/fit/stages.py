@@ -32,7 +32,6 @@ from bokehfit.fit.choice import choose_discs, slit_aspect
 from bokehfit.fit.families import FAMILIES, Family
 from bokehfit.fit.features import FEATURE_DELTA_BIC, add_feature, at_bound, features_to_test
 from bokehfit.fit.crop import DiscCrop, crop_disc
-from bokehfit.fit.crop import MAX_FIT_SIDE
 from bokehfit.fit.pixels import JointFit, PixelFit, fit_discs
 from bokehfit.fit.result import CandidateModel, DiscFit, FitOptions
 from bokehfit.fit.signature import Screen, screen
@@ -57,7 +56,7 @@ JOINT_DISCS = 8
 #: A family's trial fit on a model disc (stage 3) stops where a step changes its cost or parameters by
 #: less than this share (scipy's ftol and xtol): the trials only rank the families, by BIC =
 #: n·ln(RSS/n) + k·ln(n), which a relative change δ of the cost moves by n·δ, at most
-#: MAX_FIT_SIDE² · 1e-4 = 0.13 on a crop (the choices it makes are 10 or more apart). A family whose
+#: crop.MAX_FIT_SIDE² · 1e-4 = 0.13 on a crop (the choices it makes are 10 or more apart). A family whose
 #: shape the disc does not show (a hexagon on a round disc, its angle free to turn) otherwise crawls
 #: along the flat valley of its angle for a hundred steps, each a millionth better. The winner's
 #: trials are then carried on to the fit's own tolerance (:func:`fit_winner`).
