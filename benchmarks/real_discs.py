@@ -3,7 +3,7 @@
 Usage::
 
     BOKEHFIT_REFERENCE_DIR=path/to/reference_photos python benchmarks/real_discs.py [--json out.json] [--only 04 09]
-        [--no-person] [--finder-only]
+        [--no-person] [--finder-only] [--at-places]
 
 For every photo of ``reference_photos/manifest.json`` that has a person's
 labels (``$BOKEHFIT_REFERENCE_DIR/discs/NAME.discs.json``, same sha256), it
@@ -27,6 +27,10 @@ every disc it finds usable, as if the fit used them all: the recall is the same
 as ``compare``'s, and "used" then counts what the search offers the fit (its
 junk before the fit's consensus sets any aside), with the search's CPU time.
 It takes a fraction of the time of the whole run, for trying a change to the search.
+
+``--at-places`` measures each labelled usable disc and each labelled non-disc at its own place and
+size, as the search measures a place, and counts those that pass its tests of a disc: whether a miss
+is the search not finding a place, or its tests not telling a disc from a bright blob there.
 """
 
 from __future__ import annotations
@@ -146,6 +150,43 @@ def finder_only(args) -> int:
     return 0
 
 
+def at_places(args) -> int:
+    """Each labelled usable disc and each labelled non-disc measured at its own place and size, as the
+    search measures a place (its contour, and its own step along rays where that finds none): how many
+    pass the search's tests of a disc, and the edge widths over the radius of all those outlined there
+    (what the soft-edge test weighs; module notes)."""
+    import numpy as np
+
+    from bokehfit.discs.places import _measure_place
+    from bokehfit.discs.reasons import NoDisc
+    from bokehfit.io import load_photo
+
+    passed, widths, counts = Counter(), {"disc": [], "not a disc": []}, Counter()
+    for entry, photo, (_, labels) in labelled_photos(args.only):
+        loaded = load_photo(photo)
+        items = [("disc", d.center_xy, d.diameter_px) for d in labels.usable]
+        items += [("not a disc", j.center_xy, j.size_px) for j in labels.junk]
+        seen = Counter()
+        for what, xy, size in items:
+            counts[what] += 1
+            m = _measure_place(loaded.luminance, loaded.clipped, tuple(map(float, xy)), float(size))
+            if isinstance(m, NoDisc):
+                continue
+            widths[what].append(m.edge_width_px / max(0.5 * m.diameter_px, 1e-9))  # passing or not
+            if m.reason is None:
+                passed[what] += 1
+                seen[what] += 1
+        print(f"{entry['file'][:2]}  discs passing {seen['disc']}, non-discs passing {seen['not a disc']}")
+    print()
+    for what in ("disc", "not a disc"):
+        w = np.array(widths[what])
+        quartiles = ", ".join(f"{q:.2f}" for q in np.percentile(w, [25, 50, 75])) if len(w) else "-"
+        between = int(((w >= 0.6) & (w < 1.2)).sum())
+        print(f"{what}: {passed[what]}/{counts[what]} pass the search's tests at their places; of the {len(w)} "
+              f"outlined there, edge width over radius quartiles {quartiles}, {between} between 0.6 and 1.2")
+    return 0
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--json", type=Path, help="write the table as JSON")
@@ -153,9 +194,13 @@ def main(argv=None) -> int:
     parser.add_argument("--no-person", action="store_true", help="skip the fit on the person's discs")
     parser.add_argument("--finder-only", action="store_true",
                         help="run the disc search alone and score all the discs it finds usable")
+    parser.add_argument("--at-places", action="store_true",
+                        help="measure each labelled disc and non-disc at its own place: how many pass as discs")
     args = parser.parse_args(argv)
     if args.finder_only:
         return finder_only(args)
+    if args.at_places:
+        return at_places(args)
     pooled = DiscScore(0, 0, 0)
     verdicts = {"own": Counter(), "person": Counter()}
     measured = [0, 0]  # the person's discs measured usable at their places, of all

@@ -74,6 +74,6 @@ def test_the_command_runs_its_work_on_one_blas_thread(tmp_path):
     # The subprocess imports the bokehfit under test, wherever it lies.
     env["PYTHONPATH"] = os.pathsep.join([str(Path(bokehfit.__file__).resolve().parents[1]), env.get("PYTHONPATH", "")])
     out = subprocess.run([sys.executable, "-c", script, "compare", "x.jpg"], capture_output=True, text=True, env=env,
-                         cwd=tmp_path, timeout=120)
+                         cwd=tmp_path, timeout=300)
     assert out.returncode == 0, out.stderr
     assert out.stdout.split() == ["[[1]]", "[2]"]
