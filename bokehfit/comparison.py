@@ -110,7 +110,7 @@ class Comparison:
         count = len(fit.disc_fits)
         if status == "fitted":
             runner_up = self._runner_up()
-            why = "only one shape was tried" if runner_up is None else "no other shape comes close"
+            why = "no other shape comes close" if runner_up is not None else _alone(fit)
             return clip_headline(f"Sure: {what}, from {count} discs that agree; {why}.")
         return clip_headline(f"Unsure: probably {article(what)}, but {self.short_doubts[0] if self.short_doubts else 'see the doubts'}.")
 
@@ -130,7 +130,7 @@ class Comparison:
         count = len(fit.disc_fits)
         discs = f"{count} disc{'s' if count != 1 else ''} fitted"
         if margin is None or runner_up is None:
-            evidence = "only one shape was tried"
+            evidence = _alone(fit)
         elif margin < 0:  # set aside by the consensus or the outlines, whatever the pixels say (the notes say why)
             evidence = f"the pixels alone favour {article(runner_up['display_name'])} (ΔBIC {-margin:.0f})"
         elif status == "fitted":
@@ -294,6 +294,11 @@ class Comparison:
         if aperture["fstop_consistency"]:
             lines.append("inconsistent: " + aperture["fstop_consistency"])
         return lines
+
+
+def _alone(fit) -> str:
+    """Why a fit names no runner-up: only one shape was tried, or the others' outlines were too far off to fit."""
+    return "no other shape fits the outlines" if fit.others_screened else "only one shape was tried"
 
 
 def _with_roles(fit: ApertureFit, candidates: list[dict]) -> tuple[list[dict], dict | None]:

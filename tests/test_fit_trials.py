@@ -72,7 +72,8 @@ def test_rounded_blades_are_fitted_where_the_outlines_show_blades_rounder_than_s
         roundness, rounded_fitted):
     """A rounded hexagon is a candidate where some outline fits it better than both the straight
     hexagon and the circle (the rounded family at roundness 1): round discs (a circle, or a hexagon
-    rounded all the way) and straight hexagons need no roundness; blades rounded half way do."""
+    rounded all the way) and straight hexagons need no roundness; blades rounded half way do. (On
+    the round discs the straight hexagon is out of the race too: tests/test_fit_race.py.)"""
     from bokehfit.fit import fit_aperture
 
     discs = [SyntheticDisc((60.0 + 100.0 * i, 70.0), 48.0, make_aperture("hexagon", 12.0, roundness=roundness))
@@ -80,7 +81,7 @@ def test_rounded_blades_are_fitted_where_the_outlines_show_blades_rounder_than_s
     luminance = render_discs(320, 140, discs, noise_sigma=0.005, seed=5)
     fit = fit_aperture(luminance, find_discs(luminance).discs, shapes=["circle", "hexagon"])
     names = {candidate.family.name for candidate in fit.candidates}
-    assert "hexagon" in names and "circle" in names
+    assert "circle" in names and ("hexagon" in names or roundness == 1.0)
     assert ("hexagon+roundness" in names) == rounded_fitted, names
 
 

@@ -11,7 +11,9 @@ The steps (design.md §8, the simplest model the data supports):
    clearest first.
 2. **Screen.** Each disc's outline is compared with every family's radial
    signature (:mod:`bokehfit.fit.signature`); the ``FitOptions.shortlist`` families with
-   the lowest mean misfit, and always the circle, go on to the pixel fit.
+   the lowest mean misfit, and always the circle, go on to the pixel fit, less those whose
+   outline misfits every model disc far more than the best family's (out of the race:
+   ``FitOptions.out_of_race_screen``).
 3. **Fit.** Each shortlisted family is fitted to the pixels of the first
    ``FitOptions.model_discs`` discs (:mod:`bokehfit.fit.pixels`), to the tolerance that
    ranking them by BIC needs (``stages.TRIAL_TOLERANCE``); the winner's fits are then

@@ -50,12 +50,17 @@ class FitOptions:
         Discs on which the shortlisted families compete; the winner is then fitted to all.
     sure_delta_bic_per_disc : float
         Below this BIC margin per disc between the best and the runner-up the choice is unsure.
+    out_of_race_screen : float
+        A shortlisted shape whose outline misfits every model disc more than this many times the
+        best shape's is out of the race: not fitted to pixels (the circle always is). ``math.inf``
+        fits every shortlisted shape.
     """
 
     max_discs: int = 12
     shortlist: int = 3
     model_discs: int = 4
     sure_delta_bic_per_disc: float = 10.0
+    out_of_race_screen: float = 3.0
 
     def __post_init__(self):
         for name in ("max_discs", "shortlist", "model_discs"):
@@ -65,6 +70,9 @@ class FitOptions:
         value = self.sure_delta_bic_per_disc
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
             raise InputError(f"sure_delta_bic_per_disc must be a finite number of at least 0 (got {value!r})")
+        value = self.out_of_race_screen
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not value >= 1:
+            raise InputError(f"out_of_race_screen must be a number of at least 1, or inf (got {value!r})")
 
 
 @dataclass(frozen=True)
@@ -274,6 +282,13 @@ class ApertureFit:
     def runner_up(self) -> CandidateModel | None:
         """The best model that gives another answer (:meth:`CandidateModel.same_answer`); None if none."""
         return next((m for m in self.candidates[1:] if not self.candidates[0].same_answer(m)), None)
+
+    @property
+    def others_screened(self) -> bool:
+        """Whether the outlines were screened against shapes other than those fitted (their misfit put
+        them out of the race, :func:`bokehfit.fit.stages._out_of_race`, or off the shortlist)."""
+        screened = {s.family for item in self.disc_fits for s in item.screens}
+        return bool(screened - {m.family for m in self.candidates})
 
     @property
     def margin_bic(self) -> float | None:
