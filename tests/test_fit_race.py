@@ -67,6 +67,8 @@ def test_without_the_circle_the_best_family_on_average_always_runs():
     luminance = photo_of(make_aperture("circle"))
     fit = fit_aperture(luminance, find_discs(luminance).discs, shapes=["hexagon"])
     assert "hexagon" in candidates(fit)
+    fit = fit_aperture(luminance, find_discs(luminance).discs, shapes=["slit", "square"])
+    assert candidates(fit)
 
 
 def screens(**rms):
@@ -85,5 +87,8 @@ def test_out_of_the_race_only_where_every_model_disc_says_so():
     assert not _out_of_race([FAMILIES[0]], [screens(circle=1.0, hexagon=0.01)] * 3, ratio)
     assert not _out_of_race([hexagon], [screens(circle=0.04, hexagon=0.05, slit=0.001)] * 3, ratio)
     assert not _out_of_race([hexagon], [], ratio)
+    # Elongated shapes alone: the best of them is the yardstick.
+    slit = families_for(["slit"])[0]
+    assert not _out_of_race([slit], [screens(slit=0.01)] * 3, ratio)
     # Every shape runs where the option says so.
     assert not _out_of_race([hexagon], [screens(circle=0.01, hexagon=1.0)] * 3, float("inf"))

@@ -163,29 +163,28 @@ def screen_discs(luminance: np.ndarray, clipped: np.ndarray | None, discs: list[
         tried = [family]
         if family in rounded_of and _looks_rounder(family, rounded_of[family], model_discs, by_family):
             tried.append(rounded_of[family])
-        out = _out_of_race(tried, by_family[: len(model_discs)], options.out_of_race_screen)
-        if rank == 0 or not out:  # the best on average always runs
+        # The best on average always runs (the circle too, where it is among the shapes).
+        if rank == 0 or not _out_of_race(tried, by_family[: len(model_discs)], options.out_of_race_screen):
             candidates += tried
     return Screened(crops, screens, by_family, candidates)
 
 
 def _out_of_race(tried: list[Family], by_family: list[dict[Family, Screen]], ratio: float) -> bool:
-    """Whether a family, as it would be tried (straight, and rounded where it looks rounder), misfits
-    the outline of every model disc more than ``ratio`` times the best family there
-    (``FitOptions.out_of_race_screen``; of those
-    not elongated: an elongated aperture must be seen on several discs, and a streak's outline is a
-    slit's). The circle is never out of the race: it is always a candidate (and so is the family whose
-    outlines fit best on average, where the circle is not among the shapes).
+    """Whether a family, as it would be tried (straight, and rounded where it looks rounder), misfits the
+    outline of every model disc more than ``ratio`` (``FitOptions.out_of_race_screen``) times the best
+    family there. The best of those that are not elongated, where there are any: an elongated aperture
+    must be seen on several discs, and a streak's outline is a slit's. The circle is never out of the race.
 
     The outline screen is the pixel fit's misfit seen along the edge, where the shape is. A family three
     times further than another from every disc's outline is no lens the discs show: on the independent
-    renders and the reference photos every such family trailed the winner by a BIC of thousands (a
-    12-gon on round discs: the circle's parameters, and the blades' angle free to no use), yet its fit
-    cost as much as a contender's (a third of the fit of a survey of round discs)."""
+    renders and the reference photos every such family trailed the winner by a BIC of hundreds or
+    thousands (a 12-gon on round discs: the circle's parameters, and the blades' angle free to no use),
+    yet its fit cost as much as a contender's (a third of the fit of a survey of round discs)."""
     if FAMILIES[0] in tried or not by_family:
         return False
     for found in by_family:
-        best = min(s.rms for f, s in found.items() if not f.aperture.has_aspect)
+        plain = [s.rms for f, s in found.items() if not f.aperture.has_aspect]
+        best = min(plain or [s.rms for s in found.values()])
         if min(found[f].rms for f in tried) <= ratio * best:
             return False
     return True
