@@ -49,7 +49,8 @@ def test_round_discs_fit_the_circle_alone_and_a_twelve_gon_fitted_by_hand_trails
 
 
 def test_hexagon_discs_run_the_hexagon_and_the_circle_not_the_twelve_gon():
-    fit = fit_aperture(*(lambda lum: (lum, find_discs(lum).discs))(photo_of(make_aperture("hexagon", 12.0))))
+    luminance = photo_of(make_aperture("hexagon", 12.0))
+    fit = fit_aperture(luminance, find_discs(luminance).discs)
     assert candidates(fit) == {"hexagon", "circle"}
     assert fit.family.name == "hexagon"
 
