@@ -44,8 +44,8 @@ def test_round_discs_fit_the_circle_alone_and_a_twelve_gon_fitted_by_hand_trails
     circle = FAMILIES[0]
     for disc in [d for d in discs if d.usable]:
         crop = crop_disc(luminance, disc, None, discs)
-        gap = fit_discs([crop], twelve, make_aperture("ngon(12)", 7.0)).bic - fit_discs([crop], circle, circle.aperture).bic
-        assert gap > 100.0  # a model choice is made at 10
+        twelve_bic = fit_discs([crop], twelve, make_aperture("ngon(12)", 7.0)).bic
+        assert twelve_bic - fit_discs([crop], circle, circle.aperture).bic > 100.0  # a model choice is made at 10
 
 
 def test_hexagon_discs_run_the_hexagon_and_the_circle_not_the_twelve_gon():

@@ -16,10 +16,12 @@ across (at least ``MIN_REDUCTION``, and enough that the copy has at most
 is left to the blob search). The copy is searched in tiles of ``TILE_PX``
 (each with a margin of the band's largest circle, a circle kept by the tile that
 holds its centre): the transform's work grows faster than the pixels it is
-given (a 5.5-MP copy of a sunlit juniper took 43 s of CPU whole, 2.2 s in tiles of 512 px, for
-about the same circles; the accumulator's grid lies on each tile's corner, so a circle's centre may
-move by a pixel, and a circle at the transform's threshold come or go, with the tiling), and a tile that shows texture rather than discs of the band (below)
-is skipped without costing its neighbours their discs. On
+given (a 5.5-MP copy of a sunlit juniper took 43 s of CPU whole, 2.2 s in tiles
+of 512 px, for about the same circles: the accumulator's grid lies on each
+tile's corner, so a circle's centre may move by a pixel, and a circle at the
+transform's threshold come or go, with the tiling), and a tile that shows
+texture rather than discs of the band (below) is skipped without costing its
+neighbours their discs. On
 the copy's logarithm (a disc of 5 % contrast over bright haze steps as much as
 one of 5 % over a dark ground; ``LOG_FLOOR`` keeps the dark's noise from
 becoming steps), less its mean at the band's scale and over its local spread
