@@ -2,7 +2,8 @@
 
 :func:`judge` turns a fit's evidence (the runner-up's margin, the notes, the discs'
 outlines, how many discs, their overlap with the kernel, their size and contrast) into
-the doubts that make a result ``unsure`` and the reason that makes it ``no_fit``;
+the doubts that make a result ``unsure`` and the reason that makes it ``no_fit``
+(and, beside the thresholds, discs whose profile the model does not have: :func:`profiles_unexplained`);
 :func:`short_doubts` says the same doubts in a few words each for the verdict's first
 sentence. Both read the thresholds below, which the docs state.
 """
@@ -11,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from bokehfit.apertures import FEATURE_SPECS
 from bokehfit.fit import REGULAR_OUTLINE_MISFIT, ApertureFit
 from bokehfit.words import article
 
@@ -21,6 +23,7 @@ __all__ = [
     "MIN_SURE_IOU",
     "SMALL_DISC_PX",
     "judge",
+    "profiles_unexplained",
     "short_doubts",
 ]
 
@@ -58,6 +61,10 @@ def judge(fit: ApertureFit, metrics: dict[str, float | None]) -> tuple[list[str]
         doubts.append(f"the discs are small and faint (median {faint[0]:.0f} px, {faint[1]:.0%} above their background;"
                       f" {SMALL_DISC_PX:.0f} px or {FAINT_CONTRAST_REL:.0%} for a sure fit): their outlines follow the"
                       " photo's tone curve, grain and compression as much as the aperture")
+    unexplained = profiles_unexplained(fit)
+    if unexplained:
+        doubts.append(f"{unexplained} of the {fitted} discs fitted show a profile the model does not have (a ring's bright"
+                      " rim or a bright centre): the discs disagree about the lens's rim")
     rejection = None
     if iou is not None and iou < MIN_ACCEPTABLE_IOU:
         rejection = (
@@ -78,6 +85,17 @@ def _small_and_faint(fit: ApertureFit) -> tuple[float, float] | None:
     return (diameter, contrast) if diameter < SMALL_DISC_PX and contrast < FAINT_CONTRAST_REL else None
 
 
+def profiles_unexplained(fit: ApertureFit) -> int:
+    """How many of the fitted discs are rings (their centre a quarter of their contrast below their rim:
+    ``bokehfit.discs.verdict.RING_DIP``) where the model has no bright rim (rim > 0), or have a bright
+    centre where it has none (rim < 0). Light spread evenly over the aperture makes neither; a lens's rim (§3b) is shared
+    by every disc, so such a disc and the model the other discs chose disagree about the lens."""
+    shown = FEATURE_SPECS["rim"].shows(fit.aperture) and "rim" in fit.aperture.enabled_features
+    bright_rim, bright_centre = shown and fit.aperture.rim > 0.0, shown and fit.aperture.rim < 0.0
+    discs = [item.disc for item in fit.disc_fits]
+    return sum((d.ring and not bright_rim) or (d.bright_centre and not bright_centre) for d in discs)
+
+
 def short_doubts(fit: ApertureFit, metrics: dict[str, float | None]) -> list[str]:
     """The doubts of :func:`judge` in a few words each, most telling first (for the verdict's first sentence)."""
     words = []
@@ -93,6 +111,8 @@ def short_doubts(fit: ApertureFit, metrics: dict[str, float | None]) -> list[str
         words.append("the discs match it only loosely")
     if _small_and_faint(fit):
         words.append("the discs are small and faint")
+    if profiles_unexplained(fit):
+        words.append("some discs show a rim the model does not have")
     if fit.notes:
         words.append("a better-fitting shape was set aside (see the notes)")
     return words
