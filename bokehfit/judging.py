@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from bokehfit.apertures import FEATURE_SPECS
+from bokehfit.apertures.features import MIN_RIM
 from bokehfit.fit import REGULAR_OUTLINE_MISFIT, ApertureFit
 from bokehfit.words import article
 
@@ -90,8 +90,8 @@ def profiles_unexplained(fit: ApertureFit) -> int:
     ``bokehfit.discs.verdict.RING_DIP``) where the model has no bright rim (rim > 0), or have a bright
     centre where it has none (rim < 0). Light spread evenly over the aperture makes neither; a lens's rim (§3b) is shared
     by every disc, so such a disc and the model the other discs chose disagree about the lens."""
-    shown = FEATURE_SPECS["rim"].shows(fit.aperture) and "rim" in fit.aperture.enabled_features
-    bright_rim, bright_centre = shown and fit.aperture.rim > 0.0, shown and fit.aperture.rim < 0.0
+    rim = fit.aperture.rim  # 0 where the model has none; below MIN_RIM it shows on no photo's discs
+    bright_rim, bright_centre = rim >= MIN_RIM, rim <= -MIN_RIM
     discs = [item.disc for item in fit.disc_fits]
     return sum((d.ring and not bright_rim) or (d.bright_centre and not bright_centre) for d in discs)
 
