@@ -64,7 +64,7 @@ def judge(fit: ApertureFit, metrics: dict[str, float | None]) -> tuple[list[str]
     unexplained = profiles_unexplained(fit)
     if unexplained:
         doubts.append(f"{unexplained} of the {fitted} discs fitted show a profile the model does not have (a ring's bright"
-                      " rim or a bright centre): the discs disagree about the lens's rim")
+                      " rim or a bright centre) and the model has no rim: the discs disagree about the lens")
     rejection = None
     if iou is not None and iou < MIN_ACCEPTABLE_IOU:
         rejection = (
@@ -87,13 +87,14 @@ def _small_and_faint(fit: ApertureFit) -> tuple[float, float] | None:
 
 def profiles_unexplained(fit: ApertureFit) -> int:
     """How many of the fitted discs are rings (their centre a quarter of their contrast below their rim:
-    ``bokehfit.discs.verdict.RING_DIP``) where the model has no bright rim (rim > 0), or have a bright
-    centre where it has none (rim < 0). Light spread evenly over the aperture makes neither; a lens's rim (§3b) is shared
-    by every disc, so such a disc and the model the other discs chose disagree about the lens."""
-    rim = fit.aperture.rim  # 0 where the model has none; below MIN_RIM it shows on no photo's discs
-    bright_rim, bright_centre = rim >= MIN_RIM, rim <= -MIN_RIM
-    discs = [item.disc for item in fit.disc_fits]
-    return sum((d.ring and not bright_rim) or (d.bright_centre and not bright_centre) for d in discs)
+    ``bokehfit.discs.verdict.RING_DIP``) or have a bright centre, where the model has no rim that shows
+    (``MIN_RIM``). Light spread evenly over the aperture makes neither. A lens's rim (§3b) is every disc's,
+    a bright rim behind the focus and a bright centre before it (the near side turns its sign), so a
+    model with a rim of either sign explains both; without one, such a disc and the model the other
+    discs chose disagree about the lens."""
+    if abs(fit.aperture.rim) >= MIN_RIM:  # 0 where the model has none
+        return 0
+    return sum(item.disc.ring or item.disc.bright_centre for item in fit.disc_fits)
 
 
 def short_doubts(fit: ApertureFit, metrics: dict[str, float | None]) -> list[str]:
