@@ -94,7 +94,7 @@ def profiles_unexplained(fit: ApertureFit) -> int:
     discs chose disagree about the lens."""
     if abs(fit.aperture.rim) >= MIN_RIM:  # 0 where the model has none
         return 0
-    return sum(item.disc.ring or item.disc.bright_centre for item in fit.disc_fits)
+    return sum(item.disc.profiled for item in fit.disc_fits)
 
 
 def short_doubts(fit: ApertureFit, metrics: dict[str, float | None]) -> list[str]:

@@ -194,7 +194,7 @@ def used_as(disc: Disc, fitted) -> str:
         return "plateau and outline"
     if fitted.censored:
         return f"outline (saturated: {fitted.censored} clipped pixels fitted as lower bounds)"
-    if disc.ring or disc.bright_centre:
+    if disc.profiled:
         return f"outline and profile ({'a ring: bright rim' if disc.ring else 'bright centre'})"
     if disc.evidence == "partial" or disc.overlaps:
         left_out = "the occluder" if disc.occluded else "the other light"

@@ -85,6 +85,11 @@ class Disc:
                 and self.outline_seen >= MIN_FIT_SEEN)
 
     @property
+    def profiled(self) -> bool:
+        """Its light is not spread evenly over the aperture: a ring or a bright centre (a rim, §3b)."""
+        return self.ring or self.bright_centre
+
+    @property
     def shape_usable(self) -> bool:
         """Its outline says something about the shape: resolvable and at least MIN_OUTLINE_SEEN of it seen."""
         return self.resolvable and self.outline_seen >= MIN_OUTLINE_SEEN

@@ -89,7 +89,7 @@ def measure_chromatic(rgb: Callable[[slice, slice], np.ndarray], discs: Sequence
     height, width = shape
     ratios, readable = [], []
     for disc in discs:
-        if disc.evidence != "plateau" or disc.saturated or disc.ring or disc.bright_centre:
+        if disc.evidence != "plateau" or disc.saturated or disc.profiled:
             continue
         half = int(math.ceil((1.7 + _WINDOW_REL) * 0.5 * disc.diameter_px + 6.0))
         col, row = int(round(disc.center_xy[0])), int(round(disc.center_xy[1]))

@@ -138,7 +138,7 @@ def features_to_test(fits: list[PixelFit], discs: list[Disc], screens: list[Scre
     stretched alike along the frame's axes (:func:`_squeeze_signal`)."""
     signals = [v for v in (_rim_signal(c, f) for c, f in zip(crops, fits)) if v is not None]
     profiled = bool(signals) and abs(float(np.median(signals))) >= RIM_SIGNAL
-    features = ["rim"] if profiled or any(d.ring or d.bright_centre for d in discs) else []
+    features = ["rim"] if profiled or any(d.profiled for d in discs) else []
     field = np.array([math.hypot(*f.field_position) for f in fits])
     rms = np.array([s.rms for s in screens])
     outer, inner = rms[field >= VIGNETTING_MIN_FIELD], rms[field < VIGNETTING_MIN_FIELD]
