@@ -80,16 +80,18 @@ def test_a_carpet_of_small_discs_costs_the_edge_search_nothing():
     assert time.process_time() - start < 2.0  # 12 s of CPU when the finest band was transformed
 
 
-def _ring_photo(width: int, height: int, centres, diameter: float, seed: int = 3) -> np.ndarray:
+def _ring_photo(width: int, height: int, centres, diameter: float, seed: int = 3, glow: float = 0.06,
+                glow_size: float = 0.75, glow_area_px: int = 10_000) -> np.ndarray:
     """Soap-bubble rings (a rim a sixth of the radius wide, a centre a little above the ground) over lit
     ground, blurred glows of foliage of about their size and larger: the ground's light varies as much
-    as the rings', so that no blob of a ring stands out of it."""
+    as the rings', so that no blob of a ring stands out of it. A glow every ``glow_area_px`` pixels,
+    ``glow`` at its peak, its σ ``glow_size`` of the rings' diameter."""
     rng = np.random.default_rng(seed)
     image = np.zeros((height, width), dtype=np.float32)
-    glows = rng.uniform((0, 0), (width, height), size=(width * height // 10_000, 2))
-    spread = 0.75 * diameter
-    for gx, gy in glows.astype(int):  # points of light, blurred below into glows of 0.06 at their peak
-        image[gy, gx] += 0.06 * 2.0 * math.pi * spread**2
+    glows = rng.uniform((0, 0), (width, height), size=(width * height // glow_area_px, 2))
+    spread = glow_size * diameter
+    for gx, gy in glows.astype(int):  # points of light, blurred below into glows of ``glow`` at their peak
+        image[gy, gx] += glow * 2.0 * math.pi * spread**2
     image = 0.04 + cv2.GaussianBlur(image, (0, 0), spread)
     yy, xx = np.mgrid[0:height, 0:width].astype(np.float32)
     radius = 0.5 * diameter
@@ -130,3 +132,27 @@ def test_a_circle_across_the_tiles_borders_is_found_once():
     assert all(_found(found, centres, 48.0)), found
     for centre in centres:
         assert sum(math.dist(xy, centre) < 0.15 * 48.0 for xy, _ in found) == 1, (centre, found)
+
+
+def test_rings_over_bright_foliage_are_kept_by_their_own_step(monkeypatch):
+    """Rings of 48 px over denser, brighter glows of foliage (a glow every 3,000 px, 0.1 at its peak,
+    σ a quarter of their size; the rims 0.08): the surround varies pixel by pixel about as much as the
+    rim, so the contour calls each ring faint, as on photo 04. The edges follow each circle, and its own
+    step along rays shows a rim above a dimmer centre: kept, as rings of their size. The ground alone
+    gives no ring, and without the rays (RING_RAYS_AFTER empty) the rings are lost."""
+    from bokehfit.discs import search
+
+    centres = [(300.0 + 300.0 * i, 300.0 + 300.0 * j) for i in range(3) for j in range(3)]
+    dense = dict(glow=0.1, glow_size=0.5, glow_area_px=3000)
+
+    def rings_found(image):
+        discs = [d for d in find_discs(image, min_diameter_px=8).discs if d.usable and d.ring]
+        return sum(any(math.dist(d.center_xy, c) < 0.15 * 48.0 and abs(d.diameter_px / 48.0 - 1) < 0.15
+                       for d in discs) for c in centres), len(discs)
+
+    image = _ring_photo(1200, 1200, centres, 48.0, **dense)
+    found, rings = rings_found(image)
+    assert found >= 7 and rings <= found + 1, (found, rings)
+    assert rings_found(_ring_photo(1200, 1200, [], 48.0, **dense))[1] == 0
+    monkeypatch.setattr(search, "RING_RAYS_AFTER", ())
+    assert rings_found(image)[0] <= 1

@@ -8,7 +8,8 @@
    (:func:`_measure_cluster`); a blob by its contour and, where that calls it faint or soft-edged,
    by its own step along rays (:func:`_measure_blob`).
 3. The circles through the photo's edges that no candidate measured (:func:`_circle_discs`),
-   measured as places (:mod:`bokehfit.discs.places`).
+   measured as places (:mod:`bokehfit.discs.places`); a small one the contour calls faint, kept
+   where its own step along rays shows a ring (:func:`_ring_by_rays`).
 4. The discs whose contour runs into their neighbours' light measured again by their own step
    (:func:`bokehfit.discs.places._by_own_steps`).
 5. The result (:func:`bokehfit.discs.disc._discs_of`): one per disc, largest first, each with
@@ -38,8 +39,10 @@ from bokehfit.discs.disc import (
     _same_size,
 )
 from bokehfit.discs.measure import RESOLVABLE_PX, Measurement, measure_candidate, split_cluster
-from bokehfit.discs.places import MIN_NOISE, _by_own_steps, _by_rays_after, _measure_place
+from bokehfit.discs.places import MIN_NOISE, _by_own_steps, _by_rays_after, _measure_place, _near_place
+from bokehfit.discs.rays import measure_rays
 from bokehfit.discs.reasons import NoDisc, Reason
+from bokehfit.discs.verdict import ring_all_round
 
 #: Smallest disc the detector seeks by default (``bokehfit discs``): glints from 4 px are counted.
 DEFAULT_MIN_DIAMETER_PX = 4.0
@@ -66,6 +69,13 @@ RAYS_AFTER = (Reason.FAINT,)
 #: ... and from this size (px): the step's sides are then 5 px or more (under 64 px, at their 3-px floor,
 #: JPEG's 8-px blocks and texture make steps as clear as a small faint disc's).
 RAYS_MIN_DIAMETER_PX = 64.0
+#: A smaller circle whose contour the measurement calls faint or cannot draw is measured along rays
+#: all the same, and kept only where the rays find a ring there, its rim above its centre all round
+#: (:attr:`Measurement.ring`, :func:`bokehfit.discs.verdict.ring_all_round`): a soap-bubble disc over
+#: lit foliage, whose thin rim stands only a noise level or two above the texture around it pixel by
+#: pixel, yet is followed by the edges all round. Texture and JPEG's blocks make steps, not a closed
+#: rim around a dimmer centre; a drop's crescent of light is a rim on one side only.
+RING_RAYS_AFTER = (Reason.FAINT, Reason.NO_OUTLINE)
 #: A blob (light above its surround) whose contour the measurement draws but calls faint or soft-edged
 #: is measured again by its own step along rays: a bright-centre disc, or one over its own glow or its
 #: neighbours' light, has a step at its edge that no one level between its peak and its surround
@@ -314,6 +324,8 @@ def _circle_discs(luminance, clipped, measurements, min_diameter_px, max_diamete
         measured += 1
         m = _measure_place(luminance, clipped, xy, diameter, min_diameter_px,
                            rays_after=RAYS_AFTER if diameter >= RAYS_MIN_DIAMETER_PX else ())
+        if diameter < RAYS_MIN_DIAMETER_PX and m.reason in RING_RAYS_AFTER:
+            m = _ring_by_rays(luminance, clipped, m, xy, diameter, min_diameter_px)
         why = m if isinstance(m, NoDisc) else m.reason
         if why is None and not min_diameter_px <= m.diameter_px <= max_diameter_px:
             why = Reason.TOO_LARGE
@@ -324,3 +336,14 @@ def _circle_discs(luminance, clipped, measurements, min_diameter_px, max_diamete
             rejected[rejection.rejected_because] += 1
             rejections.append(rejection)
     return measured
+
+
+def _ring_by_rays(luminance, clipped, m: Measurement | NoDisc, xy, diameter: float,
+                  min_diameter_px: float) -> Measurement | NoDisc:
+    """The ring disc measured at a circle's place by its own step along rays, where that finds a disc
+    of about ``diameter`` there and it is a ring all round (RING_RAYS_AFTER); else the contour's ``m``."""
+    stepped = measure_rays(luminance, clipped, xy, diameter, MIN_NOISE, min_diameter_px)
+    if isinstance(stepped, Measurement) and stepped.reason is None and stepped.ring \
+            and _near_place(stepped, xy, diameter) and ring_all_round(luminance, stepped):
+        return stepped
+    return m

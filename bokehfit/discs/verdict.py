@@ -57,7 +57,7 @@ from bokehfit.discs.levels import Window, _contrast_ok, _median
 from bokehfit.discs.outlines import EDGE_WIDTH_MIN_PX, Outlined
 from bokehfit.discs.reasons import Reason
 
-__all__ = ["Measurement", "describe", "MIN_SOLIDITY", "MAX_ELONGATION", "MIN_THICKNESS_REL", "RING_DIP"]
+__all__ = ["Measurement", "describe", "ring_all_round", "MIN_SOLIDITY", "MAX_ELONGATION", "MIN_THICKNESS_REL", "RING_DIP"]
 
 #: The star, the least compact aperture, has solidity 0.68.
 MIN_SOLIDITY = 0.6
@@ -89,6 +89,10 @@ RING_DIP = 0.25
 #: band (the blurred edge beyond it would make every disc look darker at the rim, not brighter).
 RING_CENTRE_REL = 0.5
 RING_RIM_REL = (0.7, 0.95)
+#: A ring all round (:func:`ring_all_round`): its rim, cut into this many sectors, stands above its
+#: centre by RING_DIP of the contrast in more than half of them. A lens's rim is the whole edge of
+#: every disc; a drop's crescent of light or a glint on one side is not.
+RING_SECTORS = 8
 
 
 @dataclass(frozen=True)
@@ -235,6 +239,25 @@ def _is_ring(crop: np.ndarray, cx: float, cy: float, diameter: float, contrast: 
     from_centre = _window_distance(crop.shape, cx, cy) / max(0.5 * diameter, 1e-6)
     centre, rim = crop[from_centre <= RING_CENTRE_REL], crop[(from_centre >= RING_RIM_REL[0]) & (from_centre <= RING_RIM_REL[1])]
     return bool(centre.size and rim.size) and float(_median(rim) - _median(centre)) > RING_DIP * contrast
+
+
+def ring_all_round(luminance: np.ndarray, m: Measurement) -> bool:
+    """The measured disc's rim stands above its centre (by RING_DIP of its contrast) in more than half
+    of RING_SECTORS sectors of its circle, as :func:`_is_ring` measures the whole rim."""
+    cx, cy = m.center_xy
+    window = Window.around(luminance.shape, m.center_xy, int(math.ceil(0.5 * m.diameter_px)) + 1)
+    crop = window.of(luminance)
+    from_centre = _window_distance(crop.shape, cx - window.c0, cy - window.r0) / max(0.5 * m.diameter_px, 1e-6)
+    centre = crop[from_centre <= RING_CENTRE_REL]
+    rim = (from_centre >= RING_RIM_REL[0]) & (from_centre <= RING_RIM_REL[1])
+    if not centre.size or not rim.any():
+        return False
+    rows, cols = np.nonzero(rim)
+    sector = np.floor((np.arctan2(rows + window.r0 - cy, cols + window.c0 - cx) + math.pi)
+                      / (2.0 * math.pi) * RING_SECTORS).astype(int) % RING_SECTORS
+    values, above = crop[rows, cols], RING_DIP * (m.plateau - m.background) + float(_median(centre))
+    lifted = sum(float(_median(values[sector == k])) > above for k in range(RING_SECTORS) if (sector == k).any())
+    return lifted > RING_SECTORS / 2
 
 
 def _overlaps(found: Outlined, diameter: float, contrast: float) -> bool:
