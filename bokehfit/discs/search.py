@@ -8,8 +8,8 @@
    (:func:`_measure_cluster`); a blob by its contour and, where that calls it faint or soft-edged,
    by its own step along rays (:func:`_measure_blob`).
 3. The circles through the photo's edges that no candidate measured (:func:`_circle_discs`),
-   measured as places (:mod:`bokehfit.discs.places`); a small one the contour calls faint, kept
-   where its own step along rays shows a ring (:func:`_ring_by_rays`).
+   measured as places (:mod:`bokehfit.discs.places`); one the contour calls faint or cannot outline,
+   kept where its own step along rays shows a ring all round (:func:`_ring_by_rays`).
 4. The discs whose contour runs into their neighbours' light measured again by their own step
    (:func:`bokehfit.discs.places._by_own_steps`).
 5. The result (:func:`bokehfit.discs.disc._discs_of`): one per disc, largest first, each with
@@ -69,8 +69,9 @@ RAYS_AFTER = (Reason.FAINT,)
 #: ... and from this size (px): the step's sides are then 5 px or more (under 64 px, at their 3-px floor,
 #: JPEG's 8-px blocks and texture make steps as clear as a small faint disc's).
 RAYS_MIN_DIAMETER_PX = 64.0
-#: A smaller circle whose contour the measurement calls faint or cannot draw is measured along rays
-#: all the same, and kept only where the rays find a ring there, its rim above its centre all round
+#: A circle whose contour the measurement calls faint or cannot draw, where the rays were not tried
+#: after that (a smaller one, or one without an outline), is measured along rays all the same, and
+#: kept only where the rays find a ring there, its rim above its centre all round
 #: (:attr:`Measurement.ring`, :func:`bokehfit.discs.verdict.ring_all_round`): a soap-bubble disc over
 #: lit foliage, whose thin rim stands only a noise level or two above the texture around it pixel by
 #: pixel, yet is followed by the edges all round. Texture and JPEG's blocks make steps, not a closed
@@ -322,9 +323,9 @@ def _circle_discs(luminance, clipped, measurements, min_diameter_px, max_diamete
                                      for j in known.query_ball_point(xy, SAME_DISC_CENTRE_REL * diameter)):
             continue  # the blob search measured it (a disc, or not one)
         measured += 1
-        m = _measure_place(luminance, clipped, xy, diameter, min_diameter_px,
-                           rays_after=RAYS_AFTER if diameter >= RAYS_MIN_DIAMETER_PX else ())
-        if diameter < RAYS_MIN_DIAMETER_PX and m.reason in RING_RAYS_AFTER:
+        rays_after = RAYS_AFTER if diameter >= RAYS_MIN_DIAMETER_PX else ()
+        m = _measure_place(luminance, clipped, xy, diameter, min_diameter_px, rays_after=rays_after)
+        if m.reason in RING_RAYS_AFTER and m.reason not in rays_after:
             m = _ring_by_rays(luminance, clipped, m, xy, diameter, min_diameter_px)
         why = m if isinstance(m, NoDisc) else m.reason
         if why is None and not min_diameter_px <= m.diameter_px <= max_diameter_px:
