@@ -136,7 +136,7 @@ def test_a_circle_across_the_tiles_borders_is_found_once():
 
 def test_rings_over_bright_foliage_are_kept_by_their_own_step(monkeypatch):
     """Rings of 48 px over denser, brighter glows of foliage (a glow every 3,000 px, 0.1 at its peak,
-    σ a quarter of their size; the rims 0.08): the surround varies pixel by pixel about as much as the
+    σ half their size; the rims 0.08): the surround varies pixel by pixel about as much as the
     rim, so the contour calls each ring faint, as on photo 04. The edges follow each circle, and its own
     step along rays shows a rim above a dimmer centre: kept, as rings of their size. The ground alone
     gives no ring, and without the rays (RING_RAYS_AFTER empty) the rings are lost."""

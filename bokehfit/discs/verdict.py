@@ -57,7 +57,8 @@ from bokehfit.discs.levels import Window, _contrast_ok, _median
 from bokehfit.discs.outlines import EDGE_WIDTH_MIN_PX, Outlined
 from bokehfit.discs.reasons import Reason
 
-__all__ = ["Measurement", "describe", "ring_all_round", "MIN_SOLIDITY", "MAX_ELONGATION", "MIN_THICKNESS_REL", "RING_DIP"]
+__all__ = ["Measurement", "describe", "ring_all_round", "MIN_SOLIDITY", "MAX_ELONGATION", "MIN_THICKNESS_REL",
+           "RING_DIP"]
 
 #: The star, the least compact aperture, has solidity 0.68.
 MIN_SOLIDITY = 0.6

@@ -42,7 +42,9 @@ def refit_rest(disc_fits: list[DiscFit], consensus: Consensus, joint: Joint, mod
     """Stage 10: the discs kept beyond the joint fit's JOINT_DISCS refitted with the model's aperture fixed."""
     final = dict(zip(joint.ids, model.fit.fits))
     for i in consensus.kept[JOINT_DISCS:]:
-        final[i] = fit_discs([model.crops[i]], model.winner, model.fit.aperture, free=(), noise=[consensus.fits[i].noise],
+        # Weighted by the disc's noise, as in the joint fit: the same optimum, and a refit that stalls stops.
+        final[i] = fit_discs([model.crops[i]], model.winner, model.fit.aperture, free=(),
+                             noise=[consensus.fits[i].noise],
                              disc_starts=[model.crops[i].values_of(consensus.fits[i])]).fits[0]
     used = [DiscFit(disc_fits[i].disc, disc_fits[i].screens, {**disc_fits[i].fits, model.winner.name: final[i]},
                     own=consensus.fits[i], turned=model.turned[i]) for i in consensus.kept]
