@@ -433,3 +433,20 @@ def test_outline_points_near_a_mask_are_those_of_the_whole_crop():
         np.testing.assert_array_equal(got, whole <= UNSEEN_MARGIN_PX)
         near_some += bool(got.any()) and not got.all()
     assert near_some >= 100
+
+
+def test_the_background_planes_least_squares_agree_with_numpys_and_survive_pixels_on_one_row():
+    """The plane through a surround's pixels is solved by its 3 × 3 normal equations (levels._least_squares_3):
+    the coefficients of np.linalg.lstsq's SVD to rounding, on a window's coordinates; and pixels that all
+    lie on one row (no slope across the rows to be had) still get a plane through their light."""
+    from bokehfit.discs.levels import _least_squares_3
+
+    rng = np.random.default_rng(4)
+    rows, cols = rng.integers(0, 900, 800).astype(float), rng.integers(0, 900, 800).astype(float)
+    design = np.column_stack([np.ones(800), rows, cols])
+    values = 0.2 + 3e-4 * rows - 1e-4 * cols + rng.normal(0.0, 0.01, 800)
+    expected = np.linalg.lstsq(design, values, rcond=None)[0]
+    assert np.allclose(_least_squares_3(design, values), expected, rtol=1e-9, atol=1e-12)
+    flat = np.column_stack([np.ones(50), np.full(50, 7.0), np.arange(50.0)])
+    solved = _least_squares_3(flat, 0.5 + 0.01 * np.arange(50.0))
+    assert np.allclose(flat @ solved, 0.5 + 0.01 * np.arange(50.0))
