@@ -235,27 +235,30 @@ class _Clipping:
         return cls(share, saturated, beyond, _near(ring & clipped_crop, outline, UNSEEN_MARGIN_PX))
 
 
+def _centre_and_rim(crop: np.ndarray, cx: float, cy: float, diameter: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The light of a disc's centre (within RING_CENTRE_REL of its radius) in ``crop``, and the rows and
+    columns of its rim's pixels (the band RING_RIM_REL), the disc's centre at (cx, cy) in the crop."""
+    from_centre = _window_distance(crop.shape, cx, cy) / max(0.5 * diameter, 1e-6)
+    rows, cols = np.nonzero((from_centre >= RING_RIM_REL[0]) & (from_centre <= RING_RIM_REL[1]))
+    return crop[from_centre <= RING_CENTRE_REL], rows, cols
+
+
 def _is_ring(crop: np.ndarray, cx: float, cy: float, diameter: float, contrast: float) -> bool:
     """The disc's rim lies above its centre by more than RING_DIP of its contrast."""
-    from_centre = _window_distance(crop.shape, cx, cy) / max(0.5 * diameter, 1e-6)
-    centre, rim = crop[from_centre <= RING_CENTRE_REL], crop[(from_centre >= RING_RIM_REL[0]) & (from_centre <= RING_RIM_REL[1])]
-    return bool(centre.size and rim.size) and float(_median(rim) - _median(centre)) > RING_DIP * contrast
+    centre, rows, cols = _centre_and_rim(crop, cx, cy, diameter)
+    return bool(centre.size and rows.size) and float(_median(crop[rows, cols]) - _median(centre)) > RING_DIP * contrast
 
 
 def ring_all_round(luminance: np.ndarray, m: Measurement) -> bool:
     """The measured disc's rim stands above its centre (by RING_DIP of its contrast) in more than half
     of RING_SECTORS sectors of its circle, as :func:`_is_ring` measures the whole rim."""
-    cx, cy = m.center_xy
     window = Window.around(luminance.shape, m.center_xy, int(math.ceil(0.5 * m.diameter_px)) + 1)
     crop = window.of(luminance)
-    from_centre = _window_distance(crop.shape, cx - window.c0, cy - window.r0) / max(0.5 * m.diameter_px, 1e-6)
-    centre = crop[from_centre <= RING_CENTRE_REL]
-    rim = (from_centre >= RING_RIM_REL[0]) & (from_centre <= RING_RIM_REL[1])
-    if not centre.size or not rim.any():
+    cx, cy = m.center_xy[0] - window.c0, m.center_xy[1] - window.r0
+    centre, rows, cols = _centre_and_rim(crop, cx, cy, m.diameter_px)
+    if not centre.size or not rows.size:
         return False
-    rows, cols = np.nonzero(rim)
-    sector = np.floor((np.arctan2(rows + window.r0 - cy, cols + window.c0 - cx) + math.pi)
-                      / (2.0 * math.pi) * RING_SECTORS).astype(int) % RING_SECTORS
+    sector = np.floor((np.arctan2(rows - cy, cols - cx) + math.pi) / (2.0 * math.pi) * RING_SECTORS).astype(int) % RING_SECTORS
     values, above = crop[rows, cols], RING_DIP * (m.plateau - m.background) + float(_median(centre))
     lifted = sum(float(_median(values[sector == k])) > above for k in range(RING_SECTORS) if (sector == k).any())
     return lifted > RING_SECTORS / 2
