@@ -12,7 +12,8 @@ from shapely import affinity
 from bokehfit.apertures import Chromatic, Vignetting, make_aperture
 from bokehfit.errors import InputError
 from bokehfit.kernels import compute_kernel, render_kernel
-from bokehfit.kernels.exact import coverage, rim_coverage
+from bokehfit.kernels.exact import coverage
+from bokehfit.kernels.rim import rim_coverage
 from test_mask import ring_mask
 
 #: Chords per arc of the independent shapely outlines: each polygon lies inside
@@ -238,7 +239,7 @@ def test_sampling_methods_converge_to_exact_per_feature(gpu, method, min_rate, f
 def test_the_models_radial_fraction_is_the_outline_polygons(shape, angle, extra):
     """The rim's ρ (design.md §3b) from the aperture model, which ``rim_coverage`` uses, and from the
     fan of its outline's polygon (arcs within 1e-9), at points inside, on and outside the outline."""
-    from bokehfit.kernels.exact import radial_fraction
+    from bokehfit.kernels.rim import radial_fraction
 
     aperture = make_aperture(shape, angle, rim=0.5, **extra)
     points = np.random.default_rng(7).uniform(-1.2, 1.2, (4000, 2))

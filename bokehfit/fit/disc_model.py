@@ -25,13 +25,15 @@ import cv2
 import numpy as np
 
 from bokehfit.apertures import Aperture, image_to_aperture
-from bokehfit.kernels.exact import coverage, coverage_slopes, rim_coverage
+from bokehfit.kernels.exact import coverage, coverage_slopes
+from bokehfit.kernels.rim import rim_coverage, rim_coverage_slopes
 
 if TYPE_CHECKING:
     from bokehfit.fit.pixels import PixelFit
 
 __all__ = [
     "BLUR_RANGE",
+    "RIM",
     "DiscModel",
     "disc_profile",
     "level_pixels",
@@ -104,6 +106,8 @@ SCALE_PER_DIAMETER = math.sqrt(math.pi) / 2.0
 SLOPED = ("cx", "cy", "diameter_px")
 #: ... and the aperture's, where its outline turns whole with it (no vignetting cut).
 TURN = "angle_deg"
+#: ... and the aperture's parameter that a ``rim`` profile's light is linear in (its slope is the profile's shape).
+RIM = "rim"
 #: A quarter turn: the velocity of a point p turning about the centre is J·p per radian.
 _QUARTER_TURN = np.array([[0.0, -1.0], [1.0, 0.0]])
 
@@ -115,22 +119,27 @@ def profile_slopes(
     field_position: Sequence[float] | None = None,
     covers: dict | None = None,
 ) -> dict[str, np.ndarray] | None:
-    """∂/∂cx, ∂/∂cy and ∂/∂diameter_px of :func:`disc_profile` (flattened, by name), and ∂/∂angle_deg
-    where the aperture has an angle and no vignetting cut; None where the aperture's light has no
-    closed form (a ``rim``, a ``mask``).
+    """∂/∂cx, ∂/∂cy and ∂/∂diameter_px of :func:`disc_profile` (flattened, by name), ∂/∂angle_deg
+    where the aperture has an angle and no vignetting cut, and ∂/∂rim where it has a ``rim``; None
+    where the aperture has a ``mask``.
 
-    The coverage's exact slopes (:func:`bokehfit.kernels.exact.coverage_slopes`) blurred as the
-    profile is: the blur is linear. The outline is S·R(θ)·p₀ (the squeeze S after the turn), so
+    The coverage's exact slopes (:func:`bokehfit.kernels.exact.coverage_slopes`; with a ``rim``, those
+    of its tabulated light, :func:`bokehfit.kernels.rim.rim_coverage_slopes`) blurred as the profile
+    is: the blur is linear. The outline is S·R(θ)·p₀ (the squeeze S after the turn), so
     a degree of the angle moves its points by S·J·S⁻¹·p·π/180, J a quarter turn: a flow.
     ``covers`` lends its outlines (:func:`disc_profile`)."""
-    if aperture.rim != 0.0 or aperture.mask is not None:
+    if aperture.mask is not None:
         return None
     where = None if aperture.vignetting is None else field_position
     scale, offset_xy = _placement(disc, size)
     turns = aperture.has_angle and aperture.vignetting is None
     squeeze = aperture.squeeze_matrix()
     flow = squeeze @ _QUARTER_TURN @ np.linalg.inv(squeeze) * (math.pi / 180.0) if turns else None
-    slopes = coverage_slopes(_outline(aperture, where, covers), scale, size, offset_xy, flow=flow)
+    outline = _outline(aperture, where, covers)
+    if aperture.rim != 0.0:
+        slopes = rim_coverage_slopes(aperture, scale, size, offset_xy, where, flow, RIM_FIT_SUPERSAMPLE, outline)
+    else:
+        slopes = coverage_slopes(outline, scale, size, offset_xy, flow=flow)
     # The offset is image_to_aperture of (cy − centre, cx − centre): linear, so its columns are the chain rule's.
     (by_cx,), (by_cy,) = image_to_aperture([[0.0, 1.0]]), image_to_aperture([[1.0, 0.0]])
     sigma = max(disc["blur_px"], BLUR_RANGE[0])
@@ -140,6 +149,8 @@ def profile_slopes(
                             sized * slopes.by_scale)))
     if turns:
         raw[TURN] = slopes.by_flow
+    if slopes.by_rim is not None:
+        raw[RIM] = slopes.by_rim
     return {name: cv2.GaussianBlur(slope, (0, 0), sigma, borderType=cv2.BORDER_REPLICATE).ravel()
             for name, slope in raw.items()}
 

@@ -9,15 +9,17 @@ all), every disc's one after the other (:func:`weighted_residuals`).
 **The Jacobian** (:func:`jacobian`) is built column by column. A disc's centre and size move
 its coverage by the outline's chords on the pixel borders, and the aperture's angle by the flux
 of the turn through them (:func:`bokehfit.fit.disc_model.profile_slopes`: exact, one pass over
-the crop for the four of them); the levels follow as the model solves them (variable projection: for a profile
+the crop for the four of them); a ``rim`` profile's light moves so on its sub-pixels, its weight
+with them, and is linear in the rim (:func:`bokehfit.kernels.rim.rim_coverage_slopes`: the rim's
+column too). The shared angle's and rim's columns are taken as the disc shows the aperture (a
+near disc: the rim's sign turned, :func:`_shown_per_unit`). The levels follow as the model solves them (variable projection: for a profile
 slope ∂P, the background b and plateau p re-solved to first order, so the column is the exact
 derivative of the residuals the fit sees, as a finite difference of them would be to first
 order). Finite differences, with ``scipy.optimize.least_squares``' step (10⁻⁴ of the value, at
 least 10⁻⁴, turned back inside the bounds), remain for what has no such slope: the aperture's
 other shared parameters, and the angle where a disc's outline does not turn whole (a vignetting
-cut, a rim; each a render of every disc, as before), a disc's edge blur and saturated
-plateau (a blur and the levels of its own crop, its coverage reused), and the centre and size
-of a disc whose light has a ``rim`` profile (a render of that disc).
+cut; each a render of every disc, as before), and a disc's edge blur and saturated
+plateau (a blur and the levels of its own crop, its coverage reused).
 """
 
 from __future__ import annotations
@@ -29,7 +31,7 @@ from scipy.sparse import csr_matrix
 
 from bokehfit.apertures import Aperture
 from bokehfit.fit.crop import DiscCrop
-from bokehfit.fit.disc_model import TURN, level_pixels, profile_slopes, render_disc_model
+from bokehfit.fit.disc_model import RIM, TURN, level_pixels, profile_slopes, render_disc_model
 from bokehfit.fit.vector import Block, FitVector
 
 __all__ = ["DIFF_STEP", "censored_residuals", "disc_residuals", "jacobian", "weighted_residuals"]
@@ -135,6 +137,16 @@ def _disc_columns(aperture: Aperture, crop: DiscCrop, disc: dict[str, float], no
     return columns
 
 
+def _shown_per_unit(aperture: Aperture, crop: DiscCrop, name: str) -> float:
+    """How much the aperture as ``crop``'s disc shows it (:func:`_shown`) changes its parameter ``name``
+    (a field of the aperture) per unit of the aperture's: 1 for the angle, −1 for a near disc's rim (the
+    model's :meth:`~bokehfit.apertures.Aperture.near`), 1 for a far disc's."""
+    value = float(getattr(aperture, name))
+    step = -1e-3 if value > 0.0 else 1e-3  # towards 0: inside every parameter's range
+    moved = _shown(aperture.replace(**{name: value + step}), crop)
+    return (float(getattr(moved, name)) - float(getattr(_shown(aperture, crop), name))) / step
+
+
 def jacobian(crops: Sequence[DiscCrop], vector: FitVector, noise: np.ndarray, covers: dict,
              sparse: bool) -> Callable[[np.ndarray], np.ndarray | csr_matrix]:
     """The Jacobian of :func:`weighted_residuals` at a vector (the module notes); sparse (CSR) where
@@ -142,21 +154,25 @@ def jacobian(crops: Sequence[DiscCrop], vector: FitVector, noise: np.ndarray, co
     parameters and its own alone."""
     residuals = weighted_residuals(crops, vector, noise, covers)
     rows = np.cumsum([0, *(c.data.size for c in crops)])
+    sloped = [name for name in vector.free if name in (TURN, RIM)]  # the shared parameters the model has slopes for
 
     def jac(x: np.ndarray) -> np.ndarray | csr_matrix:
         matrix = np.zeros((rows[-1], vector.size))
         aperture = vector.aperture_at(x)
-        turns = []  # each disc's rows of the angle's column, where the model has them
+        shared = {name: [] for name in sloped}  # each disc's rows of their columns, where the model has them
         for i, (crop, disc, block) in enumerate(zip(crops, vector.discs_at(x), vector.discs)):
             columns = _disc_columns(aperture, crop, disc, noise[i], block, covers)
             for k, name in enumerate(block.names):
                 matrix[rows[i] : rows[i + 1], block.at + k] = columns[name]
-            turns.append(columns.get(TURN))
+            for name in sloped:
+                column = columns.get(name)
+                shared[name].append(None if column is None else column * _shown_per_unit(aperture, crop, name))
         differenced = list(range(len(vector.free)))
-        if TURN in vector.free and all(t is not None for t in turns):
-            j = vector.free.index(TURN)
-            matrix[:, j] = np.concatenate(turns)
-            differenced.remove(j)
+        for name, parts in shared.items():
+            if all(part is not None for part in parts):
+                j = vector.free.index(name)
+                matrix[:, j] = np.concatenate(parts)
+                differenced.remove(j)
         if differenced:
             base = residuals(x)
             for j in differenced:

@@ -48,7 +48,8 @@ from bokehfit.apertures import Aperture
 from bokehfit.errors import InputError
 from bokehfit.gpu.runtime import AdapterChoice
 from bokehfit.kernels.accuracy import plan_kernel
-from bokehfit.kernels.exact import coverage, quadrant_area, rim_coverage
+from bokehfit.kernels.exact import coverage, quadrant_area
+from bokehfit.kernels.rim import rim_coverage
 from bokehfit.kernels.masks import mask_coverage
 from bokehfit.validate import RANGES, check
 

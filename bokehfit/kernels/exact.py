@@ -25,7 +25,7 @@ rounding (about 1e-12 per pixel for a 1000-px disc), for convex and
 non-convex (star) outlines, and the several loops a vignetting cut can leave.
 
 The ``rim`` profile has no closed form over a pixel's share of a rounded or
-clipped outline; :func:`rim_coverage` tabulates it with a stated bound.
+clipped outline; :func:`bokehfit.kernels.rim.rim_coverage` tabulates it with a stated bound.
 """
 
 from __future__ import annotations
@@ -42,11 +42,10 @@ from bokehfit.apertures import (
     Outline,
     Segment,
     aperture_rows_to_image,
-    image_to_aperture,
 )
 from bokehfit.apertures.samplers import x_minus_sin
 
-__all__ = ["RIM_SUPERSAMPLE", "CoverageSlopes", "coverage", "coverage_slopes", "quadrant_area", "radial_fraction", "rim_coverage"]
+__all__ = ["CoverageSlopes", "coverage", "coverage_slopes", "quadrant_area"]
 
 
 #: Columns of one elliptic piece's row in :attr:`_Boundary.arcs` (see :func:`_elliptic_pieces`).
@@ -340,38 +339,74 @@ def coverage(
     boundary = _scaled_boundary(scaled)
     dx, dy = offset_xy
     xs, ys = edges - dx, edges - dy
-    work = (size + 1) ** 2 * (len(boundary.segments) + len(boundary.arcs) + _EDGE_FIXED_PIECES)
-    crossed = None if work <= _EDGE_ONLY_MIN_WORK else _edge_pixels(scaled, size, (centre + dx, centre + dy))
-    if crossed is None or crossed.sum() > _EDGE_ONLY_SHARE * size * size:
-        cumulative = _area_below_left(boundary, xs, ys)
-        cells = cumulative[1:, 1:] - cumulative[:-1, 1:] - cumulative[1:, :-1] + cumulative[:-1, :-1]
+    crossed = _crossed(scaled, boundary, size, (centre + dx, centre + dy))
+    if crossed is None:
+        cells = _cells(_area_below_left(boundary, xs, ys))
         return np.clip(aperture_rows_to_image(cells), 0.0, 1.0)  # rows of `cells` run up in y
-    import cv2
-
-    # One pixel of each region that the crossed pixels enclose joins them, to say which side it is on.
-    count, regions = cv2.connectedComponents((~crossed).astype(np.uint8), connectivity=4)
-    member = np.empty(count, dtype=np.int64)
-    member[regions.ravel()] = np.arange(size * size)  # some pixel of each region (label 0: the crossed ones)
-    probes = member[1:]
-    evaluate = crossed.copy()
-    evaluate.ravel()[probes] = True
-    corners = np.zeros((size + 1, size + 1), dtype=bool)
-    for dr in (0, 1):
-        for dc in (0, 1):
-            corners[dr : dr + size, dc : dc + size] |= evaluate
-    rows, cols = np.nonzero(corners)
+    probed = _Probed.of(crossed)
     cumulative = np.zeros((size + 1, size + 1))
-    cumulative[rows, cols] = _area_below_left(boundary, xs, ys, rows, cols)
-    cells = cumulative[1:, 1:] - cumulative[:-1, 1:] - cumulative[1:, :-1] + cumulative[:-1, :-1]
-    inside = np.zeros(count)
-    inside[1:] = cells.ravel()[probes] > 0.5  # 0 or 1 up to rounding
-    cells = np.where(crossed, cells, inside[regions])
-    return np.clip(aperture_rows_to_image(cells), 0.0, 1.0)  # rows of `cells` run up in y
+    cumulative[probed.rows, probed.cols] = _area_below_left(boundary, xs, ys, probed.rows, probed.cols)
+    return np.clip(aperture_rows_to_image(probed.filled(_cells(cumulative))), 0.0, 1.0)
 
 
-def _quadrant_slopes(boundary: _Boundary, xs: np.ndarray, ys: np.ndarray) -> tuple[np.ndarray, ...]:
+def _cells(f: np.ndarray) -> np.ndarray:
+    """Each pixel's second difference of ``f`` over its four corners (rows up in y, as ``f``)."""
+    return f[1:, 1:] - f[:-1, 1:] - f[1:, :-1] + f[:-1, :-1]
+
+
+def _crossed(scaled: Outline, boundary: _Boundary, size: int, origin: tuple[float, float]) -> np.ndarray | None:
+    """The pixels the outline crosses (:func:`_edge_pixels`), or None where the whole grid is integrated
+    (it costs little, or the outline crosses much of it: ``_EDGE_ONLY_MIN_WORK``, ``_EDGE_ONLY_SHARE``)."""
+    work = (size + 1) ** 2 * (len(boundary.segments) + len(boundary.arcs) + _EDGE_FIXED_PIECES)
+    if work <= _EDGE_ONLY_MIN_WORK:
+        return None
+    crossed = _edge_pixels(scaled, size, origin)
+    return None if crossed.sum() > _EDGE_ONLY_SHARE * size * size else crossed
+
+
+@dataclass(frozen=True)
+class _Probed:
+    """The pixels integrated on a grid whose outline crosses few of them: the crossed pixels, and one
+    pixel of each region that they enclose, to say which side it is on (each region is wholly inside
+    or wholly outside); the corners (rows, cols) to evaluate for them."""
+
+    crossed: np.ndarray  #: the crossed pixels (rows up in y)
+    regions: np.ndarray  #: each pixel's region (0: the crossed ones)
+    probes: np.ndarray  #: a pixel (flat index) of each region after the first
+    rows: np.ndarray
+    cols: np.ndarray
+
+    @classmethod
+    def of(cls, crossed: np.ndarray) -> _Probed:
+        import cv2
+
+        size = crossed.shape[0]
+        count, regions = cv2.connectedComponents((~crossed).astype(np.uint8), connectivity=4)
+        member = np.empty(count, dtype=np.int64)
+        member[regions.ravel()] = np.arange(size * size)  # some pixel of each region (label 0: the crossed ones)
+        probes = member[1:]
+        evaluate = crossed.copy()
+        evaluate.ravel()[probes] = True
+        corners = np.zeros((size + 1, size + 1), dtype=bool)
+        for dr in (0, 1):
+            for dc in (0, 1):
+                corners[dr : dr + size, dc : dc + size] |= evaluate
+        rows, cols = np.nonzero(corners)
+        return cls(crossed, regions, probes, rows, cols)
+
+    def filled(self, cells: np.ndarray) -> np.ndarray:
+        """The coverage of every pixel from ``cells`` (exact on the crossed and probed pixels): the
+        crossed pixels' own, the others their region's 1 or 0."""
+        inside = np.zeros(len(self.probes) + 1)
+        inside[1:] = cells.ravel()[self.probes] > 0.5  # 0 or 1 up to rounding
+        return np.where(self.crossed, cells, inside[self.regions])
+
+
+def _quadrant_slopes(boundary: _Boundary, xs: np.ndarray, ys: np.ndarray,
+                     rows: np.ndarray | None = None, cols: np.ndarray | None = None) -> tuple[np.ndarray, ...]:
     """∂F/∂X and ∂F/∂Y of the module notes, and the first moments of the same chords, on the grid
-    ys × xs (each of shape (len(ys), len(xs))).
+    ys × xs (each of shape (len(ys), len(xs))), or, given ``rows`` and ``cols``, at the points
+    (xs[cols], ys[rows]) (the same values, to rounding).
 
     ∂F/∂X is the length of the shape on the line x = X below Y: −Σ sign · min(f(X), Y) over the
     pieces whose span holds X; its moment ∫ y dy over that chord is −Σ sign · ½ min(f(X), Y)².
@@ -379,25 +414,34 @@ def _quadrant_slopes(boundary: _Boundary, xs: np.ndarray, ys: np.ndarray) -> tup
     t − min(t, x*) for a piece that rises, min(t, x*) − x_min for one that falls
     (:func:`_area_below_left`'s terms, differentiated); its moment ∫ x dx is −Σ sign · ½ (t² − min(t, x*)²),
     ½ (min(t, x*)² − x_min²) likewise."""
-    shape = (len(ys), len(xs))
+    grid = rows is None
+    shape = (len(ys), len(xs)) if grid else (np.size(rows),)
     by_x, by_y, moment_x, moment_y = (np.zeros(shape) for _ in range(4))
     count = len(boundary.segments) + len(boundary.arcs)
     if count == 0 or by_x.size == 0:
         return by_x, by_y, moment_x, moment_y
     t, c, _, _, start, _, sign, increasing, height = _piece_columns(boundary, xs, ys)
     within = (t > start[:, :, 0]) & (t == xs[None, :])  # X strictly inside the piece's span
-    rising = increasing[:, None, None]
-    step = max(1, _SIDE_CHUNK // (count * max(len(xs), 1)))
-    for lo in range(0, len(ys), step):
-        row = slice(lo, lo + step)
-        y = ys[None, row, None]
-        x_cross = np.minimum(t[:, None, :], c[:, row, None])
-        below = np.where(within[:, None, :], np.minimum(height[:, None, :], y), 0.0)
-        by_x[row] = (-sign * below).sum(axis=0)
-        moment_x[row] = (-sign * 0.5 * below * below).sum(axis=0)
-        tt = t[:, None, :]
-        by_y[row] = (-sign * np.where(rising, tt - x_cross, x_cross - start)).sum(axis=0)
-        moment_y[row] = (-sign * 0.5 * np.where(rising, tt * tt - x_cross * x_cross,
+    if grid:  # (pieces, rows, columns), a band of rows at a time
+        step = max(1, _SIDE_CHUNK // (count * max(len(xs), 1)))
+        chunks = [(slice(lo, lo + step), np.s_[:, None, :], np.s_[:, slice(lo, lo + step), None], slice(lo, lo + step))
+                  for lo in range(0, len(ys), step)]
+        rising = increasing[:, None, None]
+    else:  # (pieces, points)
+        rows, cols = np.ravel(rows), np.ravel(cols)
+        step = max(1, _SIDE_CHUNK // count)
+        chunks = [(slice(lo, lo + step), np.s_[:, cols[lo : lo + step]], np.s_[:, rows[lo : lo + step]],
+                   rows[lo : lo + step]) for lo in range(0, rows.size, step)]
+        start, sign, rising = start[:, :, 0], sign[:, :, 0], increasing[:, None]
+    for out, at_x, at_y, y_index in chunks:
+        y = ys[None, y_index, None] if grid else ys[None, y_index]
+        tt = t[at_x]
+        x_cross = np.minimum(tt, c[at_y])
+        below = np.where(within[at_x], np.minimum(height[at_x], y), 0.0)
+        by_x[out] = (-sign * below).sum(axis=0)
+        moment_x[out] = (-sign * 0.5 * below * below).sum(axis=0)
+        by_y[out] = (-sign * np.where(rising, tt - x_cross, x_cross - start)).sum(axis=0)
+        moment_y[out] = (-sign * 0.5 * np.where(rising, tt * tt - x_cross * x_cross,
                                                 x_cross * x_cross - start * start)).sum(axis=0)
     return by_x, by_y, moment_x, moment_y
 
@@ -410,6 +454,7 @@ class CoverageSlopes(NamedTuple):
     by_offset_y: np.ndarray  #: ∂/∂ offset y (up)
     by_scale: np.ndarray  #: ∂/∂ scale
     by_flow: np.ndarray | None = None  #: ∂/∂t as the outline's points move by dp/dt = M·p (``flow`` M), if asked
+    by_rim: np.ndarray | None = None  #: ∂/∂rim of a ``rim`` profile's light (:mod:`bokehfit.kernels.rim`)
 
 
 def coverage_slopes(
@@ -437,18 +482,30 @@ def coverage_slopes(
     the chord, from ∂F/∂X and its moment; on y = Y, ∫ (M₁₀ x + M₁₁ Y) dx likewise (the scale is
     the flow M = I/s, and gives the same column). Every term is the closed form of the module
     notes: exact up to rounding, for the pieces :func:`coverage` takes (no ``rim``, no ``mask``).
-    The corners of every pixel are evaluated: it is meant for the fit's small crops.
+    On a grid that :func:`coverage` integrates by its crossed pixels alone, so does this: the
+    others keep their coverage and do not move.
     """
     centre = (size - 1) / 2.0
     edges = np.arange(size + 1, dtype=np.float64) - 0.5 - centre
     outline = aperture if isinstance(aperture, Outline) else aperture.outline(field_position)
-    boundary = _boundary(outline, scale)
+    scaled = outline.transformed(np.diag([scale, scale]))
+    boundary = _scaled_boundary(scaled)
     xs, ys = edges - offset_xy[0], edges - offset_xy[1]
-    area = _area_below_left(boundary, xs, ys)
-    by_x, by_y, moment_x, moment_y = _quadrant_slopes(boundary, xs, ys)
+    crossed = _crossed(scaled, boundary, size, (centre + offset_xy[0], centre + offset_xy[1]))
+    if crossed is None:
+        area = _area_below_left(boundary, xs, ys)
+        by_x, by_y, moment_x, moment_y = _quadrant_slopes(boundary, xs, ys)
+    else:  # only the crossed pixels move with the outline: the others' slopes are 0
+        probed = _Probed.of(crossed)
+        rows, cols = probed.rows, probed.cols
+        grids = [np.zeros((size + 1, size + 1)) for _ in range(5)]
+        values = (_area_below_left(boundary, xs, ys, rows, cols), *_quadrant_slopes(boundary, xs, ys, rows, cols))
+        for grid, value in zip(grids, values):
+            grid[rows, cols] = value
+        area, by_x, by_y, moment_x, moment_y = grids
 
     def cells(f: np.ndarray) -> np.ndarray:  # rows of `f` run up in y
-        return aperture_rows_to_image(f[1:, 1:] - f[:-1, 1:] - f[1:, :-1] + f[:-1, :-1])
+        return aperture_rows_to_image(_cells(f) if crossed is None else np.where(crossed, _cells(f), 0.0))
 
     by_scale = (2.0 * area - xs[None, :] * by_x - ys[:, None] * by_y) / scale
     by_flow = None
@@ -457,101 +514,6 @@ def coverage_slopes(
         across_x = m00 * xs[None, :] * by_x + m01 * moment_x  # ∫ v_x dy on x = X, below Y
         across_y = m10 * moment_y + m11 * ys[:, None] * by_y  # ∫ v_y dx on y = Y, left of X
         by_flow = cells((m00 + m11) * area - across_x - across_y)
-    return CoverageSlopes(np.clip(cells(area), 0.0, 1.0), -cells(by_x), -cells(by_y), cells(by_scale), by_flow)
-
-
-#: Sub-pixels a side of :func:`rim_coverage` by default.
-RIM_SUPERSAMPLE = 8
-
-
-def radial_fraction(points: np.ndarray, polygon: np.ndarray) -> tuple[np.ndarray, float]:
-    """ρ of design.md §3b for ``points`` of a polygon star-shaped about the origin, and max |∇ρ|.
-
-    In the fan triangle (0, a, b) whose angle holds p, ρ = (p·n)/(a·n) with n
-    the normal of the edge ab: linear, with gradient n/(a·n), whose length is
-    one over the distance from the origin to the edge's line. ρ is defined
-    (and grows past 1) outside the polygon too.
-    """
-    polygon = np.asarray(polygon, dtype=np.float64)
-    angles = np.arctan2(polygon[:, 1], polygon[:, 0])
-    start = int(np.argmin(angles))
-    polygon = np.roll(polygon, -start, axis=0)
-    angles = np.unwrap(np.roll(angles, -start))
-    a, b = polygon, np.roll(polygon, -1, axis=0)
-    normal = np.stack([b[:, 1] - a[:, 1], a[:, 0] - b[:, 0]], axis=-1)
-    support = np.sum(a * normal, axis=-1)  # a·n = b·n > 0 for a counter-clockwise fan
-    theta = np.arctan2(points[..., 1], points[..., 0])
-    theta = np.where(theta < angles[0], theta + 2.0 * np.pi, theta)
-    k = np.clip(np.searchsorted(angles, theta, side="right") - 1, 0, len(polygon) - 1)
-    rho = np.sum(points * normal[k], axis=-1) / support[k]
-    return rho, fan_gradient(polygon)
-
-
-def fan_gradient(polygon: np.ndarray) -> float:
-    """max |∇ρ| over a polygon star-shaped about the origin: one over the least distance from the
-    origin to an edge's line (:func:`radial_fraction`)."""
-    polygon = np.asarray(polygon, dtype=np.float64)
-    a, b = polygon, np.roll(polygon, -1, axis=0)
-    normal = np.stack([b[:, 1] - a[:, 1], a[:, 0] - b[:, 0]], axis=-1)
-    return float(np.max(np.hypot(normal[:, 0], normal[:, 1]) / np.abs(np.sum(a * normal, axis=-1))))
-
-
-def rim_coverage(
-    aperture: Aperture,
-    scale: float,
-    size: int,
-    field_position=None,
-    supersample: int = RIM_SUPERSAMPLE,
-    max_chord_error: float = 1e-6,
-    offset_xy: tuple[float, float] = (0.0, 0.0),
-) -> tuple[np.ndarray, float]:
-    """Light of an aperture with a ``rim`` profile on each pixel (tabulated), and its L1 error bound.
-
-    Notes
-    -----
-    The weight w = 1 + rim·(2ρ² − 1) has no closed-form integral over the
-    intersection of a pixel with a rounded or clipped outline. Each pixel is
-    cut into ``supersample``² sub-pixels; a sub-pixel's exact area coverage
-    (:func:`coverage` on the finer grid, clipped by the vignetting) is
-    weighted by w at its centre. ρ is the radial fraction of the unclipped
-    outline's polygon (arcs within ``max_chord_error`` of unit-area units).
-    w is Lipschitz with constant L = 4·|rim|·max ρ·max|∇ρ| over the shape, so
-    a sub-pixel of side h = 1/supersample is off by at most L·h/√2 times its
-    covered area: the kernel, normalised to the light it holds, is within
-
-        L1 ≤ (1 + |rim|)·L·h/√2 / (1 − |rim|)
-
-    of the exact one (the last factor bounds the normalisation's share). In
-    practice the error is far smaller: inside the outline w is smooth and the
-    midpoint rule is second order; only sub-pixels on the edge or a fan seam
-    see first-order error.
-
-    Returns
-    -------
-    image : ndarray of shape (size, size), float64
-        Light per pixel in px² of unit-weight area (sums to the area for rim 0).
-    bound : float
-        The L1 bound above, for the kernel normalised to sum to 1.
-    """
-    dx, dy = offset_xy
-    fine = coverage(aperture, scale * supersample, size * supersample, field_position=field_position,
-                    offset_xy=(dx * supersample, dy * supersample))
-    centre = (size * supersample - 1) / 2.0
-    coordinates = (np.arange(size * supersample) - centre) / (scale * supersample)  # unit-area units
-    # The weight only where there is light: the sub-pixels the shape does not touch stay 0.
-    rows, cols = np.nonzero(fine)
-    offsets_rc = np.stack([coordinates[rows], coordinates[cols]], axis=-1)
-    polygon = aperture.outline().polyline(max_chord_error)
-    points = image_to_aperture(offsets_rc) - np.array([dx, dy]) / scale
-    if aperture.mask is None:  # the model's own ρ: exact, and no search of the polygon's fan per point
-        rho, gradient = aperture.radial_fraction(points), fan_gradient(polygon)
-    else:
-        rho, gradient = radial_fraction(points, polygon)
-    weighted = np.zeros_like(fine)
-    weighted[rows, cols] = fine[rows, cols] * (1.0 + aperture.rim * (2.0 * rho * rho - 1.0))
-    image = weighted.reshape(size, supersample, size, supersample).sum(axis=(1, 3)) / supersample**2
-    rho_max = 1.0 + gradient * math.sqrt(2.0) / (scale * supersample)  # sub-pixel centres just outside the edge
-    lipschitz = 4.0 * abs(aperture.rim) * rho_max * gradient / scale  # per pixel
-    h = 1.0 / supersample
-    bound = (1.0 + abs(aperture.rim)) * lipschitz * h / math.sqrt(2.0) / max(1.0 - abs(aperture.rim), 1e-12)
-    return image, bound
+    cover = _cells(area) if crossed is None else probed.filled(_cells(area))
+    return CoverageSlopes(np.clip(aperture_rows_to_image(cover), 0.0, 1.0), -cells(by_x), -cells(by_y),
+                          cells(by_scale), by_flow)
