@@ -17,7 +17,7 @@ The real-lens features of design.md §3b are in every method: rounded blades,
 the squeeze and the vignetting cut through the exact outline (``exact``), the
 WGSL twin ``sample_aperture_params`` (``mc``) and the outline's polygon
 (``raster``); ``rim`` is tabulated in ``exact``
-(:func:`bokehfit.kernels.exact.rim_coverage`, with a stated bound), drawn
+(:func:`bokehfit.kernels.rim.rim_coverage`, with a stated bound), drawn
 with its density in ``mc`` and weighted per fragment in ``raster``.
 ``chromatic`` gives three channels (red, green, blue), the red and blue discs
 scaled by (1 + red) and (1 + blue). The near side is :meth:`Aperture.near`.
