@@ -59,13 +59,16 @@ MAX_COPY_PIXELS = 1 << 23
 TILE_PX = 256
 #: Linear light added before the logarithm (1 % of white): below it, noise is not a step.
 LOG_FLOOR = 0.01
-#: 8-bit codes per local standard deviation of the normalised copy, and the Canny threshold on it
-#: (a step of 2.5 local standard deviations).
+#: 8-bit codes per local standard deviation of the normalised copy, and the Canny threshold on it. The
+#: transform thresholds OpenCV's Scharr gradient, sixteen times a step's height: 100 is a step of about
+#: 6 codes, 0.16 of the local spread, so that most pixels of a noisy tile are edges (a third of them on the
+#: 24-MP bench photo). What selects is the transform's own test, MIN_PERFECTNESS of a circle followed by
+#: edges whose gradient points at its centre: a threshold of 1.6 spreads (1,000) lost 19 of the reference
+#: photos' 131 discs found (RESULTS.md, "Tried, not kept", 2026-11-28).
 SPREAD_CODES = 40.0
 CANNY_HIGH = 100.0
-#: Least local spread of the logarithm: on smooth ground the edge threshold (CANNY_HIGH, 2.5 spreads)
-#: is then a step of at least 5 % of the level, the faintest disc sought; a fainter swell of the
-#: light (haze, a toned sky, JPEG's smooth gradients) is no edge.
+#: Least local spread of the logarithm: on smooth ground a swell of the light fainter than this (haze, a
+#: toned sky, JPEG's smooth gradients) is not stretched to the codes of a step.
 MIN_SPREAD = 0.02
 #: A tile whose light varies mostly at scales under FINE_SCALE of the band's smallest disc (more than
 #: MAX_FINE_SHARE of the variance about its local mean) shows texture, not discs of the band: a carpet
