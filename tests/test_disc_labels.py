@@ -125,6 +125,27 @@ def test_measure_discs_at_measures_each_place_afresh():
         assert disc.usable
 
 
+def test_a_person_s_soap_bubbles_are_measured_at_about_the_size_they_read(reference_photo):
+    """Photo 09: at two of the person's soap-bubble discs (180 and 170 px) the contour outlines the light
+    inside the rim (112 and 110 px). Measured again by their own step, each is the disc the person read (the
+    labels' match: its centre within a quarter of the diameter, its size within 25 %) and usable; the discs
+    whose contour matched already keep it."""
+    from photo_factory import reference_labels
+
+    from bokehfit.discs.labels import matches
+    from bokehfit.io import load_photo
+
+    name = "09_soap-bubbles_cat-eye.jpg"
+    _, labels = reference_labels(name)
+    picks = [d for d in labels.usable if tuple(d.center_xy) in ((247.0, 100.0), (132.0, 312.0), (2414.0, 504.0))]
+    assert len(picks) == 3
+    photo = load_photo(reference_photo(name))
+    search = measure_discs_at(photo.luminance, photo.clipped, [(d.center_xy, d.diameter_px) for d in picks])
+    for label in picks:
+        found = [d for d in search.discs if matches(d.center_xy, d.diameter_px, label)]
+        assert found and found[0].usable, (label.center_xy, [(d.center_xy, d.diameter_px) for d in search.discs])
+
+
 def test_measure_discs_at_says_why_a_place_holds_no_disc():
     image = _image()
     search = measure_discs_at(image, None, [((230.0, 190.0), 40.0), ((-5.0, 10.0), 20.0), ((60.0, 60.0), 40.0)])

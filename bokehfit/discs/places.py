@@ -37,6 +37,10 @@ from bokehfit.discs.reasons import NoDisc, Reason
 
 #: Noise floor of the local noise estimate (linear units).
 MIN_NOISE = 1e-4
+#: A person's disc whose contour comes out more than this factor off the size they read (the labels' own
+#: match: a diameter within 25 %) is measured again by its own step, and the measurement nearer that size is
+#: kept: a ring's contour outlines the light inside its rim, a disc of a chain the brightest overlap.
+ASKED_SIZE_RATIO = 1.25
 
 
 def measure_discs_at(
@@ -69,7 +73,7 @@ def measure_discs_at(
     rejections: list[Rejection] = []
     measurements: list[Measurement] = []
     for xy, diameter in places:
-        m = _measure_place(luminance, clipped, xy, diameter)
+        m = _nearer_the_asked(luminance, clipped, _measure_place(luminance, clipped, xy, diameter), xy, diameter)
         if isinstance(m, NoDisc):
             rejection = Rejection.of(xy, diameter, m)
             rejected[rejection.rejected_because] += 1
@@ -107,6 +111,18 @@ def _by_rays_after(luminance, clipped, m: Measurement | NoDisc, xy, diameter: fl
     stepped = measure_rays(luminance, clipped, xy, diameter, MIN_NOISE, min_diameter_px)
     if isinstance(stepped, Measurement) and _near_place(stepped, xy, diameter) and \
             (stepped.reason is None or isinstance(m, NoDisc)):
+        return stepped
+    return m
+
+
+def _nearer_the_asked(luminance, clipped, m: Measurement | NoDisc, xy, diameter: float) -> Measurement | NoDisc:
+    """A person's disc ``m`` measured at a place by its contour, or, where that size is more than
+    ASKED_SIZE_RATIO off the ``diameter`` they read, by its own step along rays if that comes out nearer it."""
+    if not isinstance(m, Measurement) or m.own_step or abs(math.log(m.diameter_px / diameter)) <= math.log(ASKED_SIZE_RATIO):
+        return m
+    stepped = measure_rays(luminance, clipped, xy, diameter, MIN_NOISE, 1.0)
+    if isinstance(stepped, Measurement) and stepped.reason is None and _near_place(stepped, xy, diameter) and \
+            abs(math.log(stepped.diameter_px / diameter)) < abs(math.log(m.diameter_px / diameter)):
         return stepped
     return m
 
