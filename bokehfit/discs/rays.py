@@ -134,14 +134,15 @@ def _closed_path(strength: np.ndarray, reach: int) -> np.ndarray:
     whose index changes by at most ``reach`` from ray to ray: dynamic programming over three
     turns, the middle one kept."""
     rays, count = strength.shape
-    window = 2 * reach + 1
+    window = np.ones((1, 2 * reach + 1), np.uint8)  # the best of the previous ray within ``reach``: a dilation
     total = np.empty((3 * rays, count), np.float64)
     total[0] = strength[0]
     for i in range(1, 3 * rays):
-        total[i] = strength[i % rays] + ndimage.maximum_filter1d(total[i - 1], window, mode="constant", cval=-np.inf)
+        total[i] = strength[i % rays] + cv2.dilate(total[i - 1 : i], window, borderType=cv2.BORDER_CONSTANT,
+                                                   borderValue=-np.inf)[0]
     path = np.empty(3 * rays, np.int64)
     path[-1] = int(np.argmax(total[-1]))
-    for i in range(3 * rays - 2, -1, -1):
+    for i in range(3 * rays - 2, rays - 1, -1):  # back to the middle turn, the one kept
         j0 = max(0, path[i + 1] - reach)
         path[i] = j0 + int(np.argmax(total[i, j0 : path[i + 1] + reach + 1]))
     return path[rays : 2 * rays]
@@ -173,6 +174,32 @@ class _Rays:
         farther = row[hi : hi + self.side + 1]
         return (float(_median(row[lo : j - self.gap + 1])), float(_median(row[j + self.gap : hi + 1])),
                 float(_median(farther)) if len(farther) else math.nan, framed)
+
+    def levels_along(self, path: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`levels` of every ray at its radial index on ``path``, as arrays (the same medians, taken
+        over all the rays at once)."""
+        rays = np.arange(self.count)
+        lo, hi = path - self.gap - self.side, path + self.gap + self.side
+        valid = (lo >= 0) & (hi < len(self.radii))
+        inner, outer, beyond = (np.full(self.count, math.nan) for _ in range(3))
+        width = np.arange(self.side + 1)
+
+        def medians(which: np.ndarray, start: np.ndarray) -> np.ndarray:  # over side + 1 samples from ``start``
+            return np.median(self.profile[rays[which][:, None], start[which][:, None] + width], axis=1)
+
+        inner[valid], outer[valid] = medians(valid, lo), medians(valid, path + self.gap)
+        whole = valid & (hi + self.side < len(self.radii))
+        beyond[whole] = medians(whole, hi)
+        for k in np.nonzero(valid & ~whole)[0]:  # the farther side cut by the rays' end
+            beyond[k] = float(_median(self.profile[k, hi[k] :]))
+        outside = np.concatenate([np.zeros((self.count, 1), np.int64), np.cumsum(~self.inside, axis=1)], axis=1)
+        framed = valid & (outside[rays, np.minimum(hi, len(self.radii) - 1) + 1] == outside[rays, np.maximum(lo, 0)])
+        return inner, outer, beyond, framed
+
+    def sigmas(self, path: np.ndarray) -> np.ndarray:
+        """:meth:`sigma` at each ray's radial index on ``path``."""
+        pixels = self.side * self.step * np.maximum(self.radii[path] * 2.0 * math.pi / self.count, 1.0)
+        return self.noise * np.sqrt(2.0 / np.maximum(pixels, 1.0))
 
     def plateau(self, k: int, j: int) -> float:
         """The light of ray ``k`` inside radial index ``j``, from PLATEAU_FROM of the way out to the step's
@@ -243,11 +270,9 @@ def _trace(crop, centre_rc, radius, noise) -> tuple[np.ndarray, np.ndarray, Leve
     strength[~rays.inside] = 0.0  # the frame's edge is no step of the disc's
     reach = max(1, math.ceil(MAX_SLOPE * radius * 2.0 * math.pi / rays.count / rays.step))
     path = _closed_path(strength, reach)
-    measured = [rays.levels(k, j) for k, j in enumerate(path)]
-    inner, outer, beyond = (np.array([m[i] for m in measured]) for i in range(3))
-    framed = np.array([m[3] for m in measured])
+    inner, outer, beyond, framed = rays.levels_along(path)
     steps = inner - outer
-    sigma = np.array([rays.sigma(j) for j in path])
+    sigma = rays.sigmas(path)
     positive = framed & (steps > MIN_STEP_SIGMA * sigma)
     if positive.mean() < MIN_SEEN:
         return NoDisc(Reason.FAINT)
