@@ -162,43 +162,33 @@ class _Rays:
         self.slope = ndimage.gaussian_filter1d(self.profile, max(1.0, 1.0 / self.step), axis=1, order=1) / self.step
         self.noise = noise
 
-    def levels(self, k: int, j: int):
-        """The light just inside and just outside radial index ``j`` of ray ``k`` (medians over the
-        sides), the light a side's width farther out, and whether the sides lie in the frame; NaNs
-        and False where a side is empty."""
-        lo, hi = j - self.gap - self.side, j + self.gap + self.side
-        if lo < 0 or hi >= len(self.radii):
-            return math.nan, math.nan, math.nan, False
-        row = self.profile[k]
-        framed = bool(self.inside[k, lo : hi + 1].all())
-        farther = row[hi : hi + self.side + 1]
-        return (float(_median(row[lo : j - self.gap + 1])), float(_median(row[j + self.gap : hi + 1])),
-                float(_median(farther)) if len(farther) else math.nan, framed)
-
-    def levels_along(self, path: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """:meth:`levels` of every ray at its radial index on ``path``, as arrays (the same medians, taken
-        over all the rays at once)."""
-        rays = np.arange(self.count)
-        lo, hi = path - self.gap - self.side, path + self.gap + self.side
+    def levels(self, rays: np.ndarray, at: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The light just inside and just outside radial index ``at[i]`` of ray ``rays[i]`` (medians over the
+        sides), the light a side's width farther out, and whether the sides lie in the frame, as arrays over
+        the rays given; NaNs and False where a side is empty."""
+        rays, at = np.asarray(rays, np.int64), np.asarray(at, np.int64)
+        lo, hi = at - self.gap - self.side, at + self.gap + self.side
         valid = (lo >= 0) & (hi < len(self.radii))
-        inner, outer, beyond = (np.full(self.count, math.nan) for _ in range(3))
+        inner, outer, beyond = (np.full(len(rays), math.nan) for _ in range(3))
         width = np.arange(self.side + 1)
 
         def medians(which: np.ndarray, start: np.ndarray) -> np.ndarray:  # over side + 1 samples from ``start``
             return np.median(self.profile[rays[which][:, None], start[which][:, None] + width], axis=1)
 
-        inner[valid], outer[valid] = medians(valid, lo), medians(valid, path + self.gap)
+        inner[valid], outer[valid] = medians(valid, lo), medians(valid, at + self.gap)
         whole = valid & (hi + self.side < len(self.radii))
         beyond[whole] = medians(whole, hi)
-        for k in np.nonzero(valid & ~whole)[0]:  # the farther side cut by the rays' end
-            beyond[k] = float(_median(self.profile[k, hi[k] :]))
-        outside = np.concatenate([np.zeros((self.count, 1), np.int64), np.cumsum(~self.inside, axis=1)], axis=1)
-        framed = valid & (outside[rays, np.minimum(hi, len(self.radii) - 1) + 1] == outside[rays, np.maximum(lo, 0)])
-        return inner, outer, beyond, framed
+        for i in np.nonzero(valid & ~whole)[0]:  # the farther side cut by the rays' end
+            beyond[i] = float(_median(self.profile[rays[i], hi[i] :]))
+        outside = np.cumsum(~self.inside[rays], axis=1)  # rays[i]'s samples out of the frame, up to each radius
+        last = outside[np.arange(len(rays)), np.clip(hi, 0, len(self.radii) - 1)]
+        first = np.where(lo > 0, outside[np.arange(len(rays)), np.clip(lo - 1, 0, len(self.radii) - 1)], 0)
+        return inner, outer, beyond, valid & (last == first)
 
-    def sigmas(self, path: np.ndarray) -> np.ndarray:
-        """:meth:`sigma` at each ray's radial index on ``path``."""
-        pixels = self.side * self.step * np.maximum(self.radii[path] * 2.0 * math.pi / self.count, 1.0)
+    def sigma(self, at: np.ndarray) -> np.ndarray:
+        """The noise of a step at each radial index of ``at``: the pixel noise over the pixels each side
+        averages (its length by the wedge's width)."""
+        pixels = self.side * self.step * np.maximum(self.radii[at] * 2.0 * math.pi / self.count, 1.0)
         return self.noise * np.sqrt(2.0 / np.maximum(pixels, 1.0))
 
     def plateau(self, k: int, j: int) -> float:
@@ -206,12 +196,6 @@ class _Rays:
         inner side (median): a disc's plateau or rim, where a glow or a cone keeps rising inwards."""
         lo = int(PLATEAU_FROM * j)
         return float(_median(self.profile[k, lo : max(lo + 1, j - self.gap + 1)]))
-
-    def sigma(self, j: int) -> float:
-        """The noise of a step at radial index ``j``: the pixel noise over the pixels each side averages
-        (its length by the wedge's width)."""
-        pixels = self.side * self.step * max(self.radii[j] * 2.0 * math.pi / self.count, 1.0)
-        return self.noise * math.sqrt(2.0 / max(pixels, 1.0))
 
     def crossing(self, k: int, j: int, level: float) -> float | None:
         """The radius where ray ``k`` falls through ``level`` nearest radial index ``j`` (linear
@@ -270,9 +254,9 @@ def _trace(crop, centre_rc, radius, noise) -> tuple[np.ndarray, np.ndarray, Leve
     strength[~rays.inside] = 0.0  # the frame's edge is no step of the disc's
     reach = max(1, math.ceil(MAX_SLOPE * radius * 2.0 * math.pi / rays.count / rays.step))
     path = _closed_path(strength, reach)
-    inner, outer, beyond, framed = rays.levels_along(path)
+    inner, outer, beyond, framed = rays.levels(np.arange(rays.count), path)
     steps = inner - outer
-    sigma = rays.sigmas(path)
+    sigma = rays.sigma(path)
     positive = framed & (steps > MIN_STEP_SIGMA * sigma)
     if positive.mean() < MIN_SEEN:
         return NoDisc(Reason.FAINT)
@@ -298,14 +282,18 @@ def _trace(crop, centre_rc, radius, noise) -> tuple[np.ndarray, np.ndarray, Leve
     # Rays off the curve (a neighbour's edge, an occluder's) or not seen: the disc's edge is looked for
     # again near the curve, where the path did not go.
     near = tolerance / rays.step
+    again, at = [], []  # the rays looked at again, and the steepest fall near the curve on each
     for k in np.nonzero(~on)[0]:
         centre_j = curve[k] / rays.step
         j0, j1 = max(0, int(centre_j - near)), min(len(rays.radii) - 1, int(centre_j + near) + 1)
-        if j1 <= j0:
-            continue
-        j = j0 + int(np.argmin(rays.slope[k, j0 : j1 + 1]))
-        inside_k, outside_k, beyond_k, framed_k = rays.levels(k, j)
-        if framed_k and shows_edge(inside_k - outside_k, outside_k, beyond_k, rays.sigma(j)):
+        if j1 > j0:
+            again.append(k)
+            at.append(j0 + int(np.argmin(rays.slope[k, j0 : j1 + 1])))
+    levels = zip(*rays.levels(again, at), rays.sigma(np.array(at, np.int64)))
+    for k, j, values in zip(again, at, levels):
+        # Python floats: the crossing compares the float32 profile with such a level in float32 (NEP 50).
+        inside_k, outside_k, beyond_k, framed_k, sigma_k = map(float, values)
+        if framed_k and shows_edge(inside_k - outside_k, outside_k, beyond_k, sigma_k):
             where = rays.crossing(k, j, outside_k + 0.5 * (inside_k - outside_k))
             if where is not None and abs(where - curve[k]) <= near * rays.step:
                 edge[k], on[k], outer[k] = where, True, outside_k
