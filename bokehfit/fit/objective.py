@@ -140,11 +140,12 @@ def _disc_columns(aperture: Aperture, crop: DiscCrop, disc: dict[str, float], no
 def _shown_per_unit(aperture: Aperture, crop: DiscCrop, name: str) -> float:
     """How much the aperture as ``crop``'s disc shows it (:func:`_shown`) changes its parameter ``name``
     (a field of the aperture) per unit of the aperture's: 1 for the angle, −1 for a near disc's rim (the
-    model's :meth:`~bokehfit.apertures.Aperture.near`), 1 for a far disc's."""
-    value = float(getattr(aperture, name))
-    step = -1e-3 if value > 0.0 else 1e-3  # towards 0: inside every parameter's range
-    moved = _shown(aperture.replace(**{name: value + step}), crop)
-    return (float(getattr(moved, name)) - float(getattr(_shown(aperture, crop), name))) / step
+    model's :meth:`~bokehfit.apertures.Aperture.near`, linear in both), 1 for a far disc's. Taken between 0
+    and a half, where the difference of the values shown is exact."""
+    def shown(value: float) -> float:
+        return float(getattr(_shown(aperture.replace(**{name: value}), crop), name))
+
+    return (shown(0.5) - shown(0.0)) / 0.5
 
 
 def jacobian(crops: Sequence[DiscCrop], vector: FitVector, noise: np.ndarray, covers: dict,
@@ -155,6 +156,10 @@ def jacobian(crops: Sequence[DiscCrop], vector: FitVector, noise: np.ndarray, co
     residuals = weighted_residuals(crops, vector, noise, covers)
     rows = np.cumsum([0, *(c.data.size for c in crops)])
     sloped = [name for name in vector.free if name in (TURN, RIM)]  # the shared parameters the model has slopes for
+    # How each disc shows them: the same for every disc turned alike, and at every vector (near() is linear in them).
+    start = vector.aperture_at(np.array(vector.start, dtype=np.float64)) if sloped else None
+    per_unit = {(turned, name): _shown_per_unit(start, crop, name)
+                for turned, crop in {c.turned: c for c in crops}.items() for name in sloped}
 
     def jac(x: np.ndarray) -> np.ndarray | csr_matrix:
         matrix = np.zeros((rows[-1], vector.size))
@@ -166,7 +171,7 @@ def jacobian(crops: Sequence[DiscCrop], vector: FitVector, noise: np.ndarray, co
                 matrix[rows[i] : rows[i + 1], block.at + k] = columns[name]
             for name in sloped:
                 column = columns.get(name)
-                shared[name].append(None if column is None else column * _shown_per_unit(aperture, crop, name))
+                shared[name].append(None if column is None else column * per_unit[crop.turned, name])
         differenced = list(range(len(vector.free)))
         for name, parts in shared.items():
             if all(part is not None for part in parts):
