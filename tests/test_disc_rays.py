@@ -211,3 +211,43 @@ def test_the_search_measures_a_bright_centre_blob_by_its_step(radius, seed, monk
     assert len(usable) == 1, [(d.center_xy, d.diameter_px) for d in usable]
     assert abs(usable[0].diameter_px / (2 * radius) - 1) < 0.08, usable[0].diameter_px
     assert math.hypot(usable[0].center_xy[0] - centre[0], usable[0].center_xy[1] - centre[1]) < 1.0
+
+
+def test_the_rays_levels_are_each_rays_own_medians():
+    """The light inside, outside and beyond a step and whether its sides are in the frame, taken for many rays
+    at once, are each ray's own medians over its own samples (a crop cut by the frame, steps anywhere, some
+    too near the rays' ends to have sides); and the closed path is the dynamic programme's, written out plainly."""
+    from bokehfit.discs.levels import _median
+    from bokehfit.discs.rays import _closed_path, _Rays
+
+    rng = np.random.default_rng(5)
+    crop = rng.random((90, 130)).astype(np.float32)
+    rays = _Rays(crop, (20.0, 110.0), 30.0, 0.01)  # near a corner: rays leave the crop
+    assert not rays.inside.all()
+    at = rng.integers(0, len(rays.radii), rays.count)
+    inner, outer, beyond, framed = rays.levels(np.arange(rays.count), at)
+    gap, side = rays.gap, rays.side
+    for k, j in enumerate(at):
+        lo, hi = j - gap - side, j + gap + side
+        if lo < 0 or hi >= len(rays.radii):
+            assert math.isnan(inner[k]) and math.isnan(outer[k]) and not framed[k]
+            continue
+        row = rays.profile[k]
+        assert inner[k] == float(_median(row[lo : j - gap + 1]))
+        assert outer[k] == float(_median(row[j + gap : hi + 1]))
+        assert beyond[k] == float(_median(row[hi : hi + side + 1]))
+        assert framed[k] == bool(rays.inside[k, lo : hi + 1].all())
+    # The path: the dynamic programme over three turns written out plainly (each ray's best predecessor within
+    # ``reach``, then back from the best end), its middle turn kept.
+    strength = rng.random((24, 40))
+    for reach in (1, 2, 5):
+        total = [strength[0]]
+        for i in range(1, 3 * 24):
+            total.append(strength[i % 24] + ndimage.maximum_filter1d(total[-1], 2 * reach + 1, mode="constant",
+                                                                     cval=-np.inf))
+        plain = [int(np.argmax(total[-1]))]
+        for i in range(3 * 24 - 2, -1, -1):
+            j0 = max(0, plain[-1] - reach)
+            plain.append(j0 + int(np.argmax(total[i][j0 : plain[-1] + reach + 1])))
+        expected = np.array(plain[::-1][24:48])
+        np.testing.assert_array_equal(_closed_path(strength, reach), expected)
