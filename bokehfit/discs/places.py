@@ -116,8 +116,9 @@ def _by_rays_after(luminance, clipped, m: Measurement | NoDisc, xy, diameter: fl
 
 
 def _nearer_the_asked(luminance, clipped, m: Measurement | NoDisc, xy, diameter: float) -> Measurement | NoDisc:
-    """A person's disc ``m`` measured at a place by its contour, or, where that size is more than
-    ASKED_SIZE_RATIO off the ``diameter`` they read, by its own step along rays if that comes out nearer it."""
+    """A disc asked for at a place and size (a person's pick, a circle of a size the search found) ``m``
+    measured there by its contour, or, where that size is more than ASKED_SIZE_RATIO off the ``diameter``
+    asked, by its own step along rays if that comes out nearer it."""
     if not isinstance(m, Measurement) or m.own_step or abs(math.log(m.diameter_px / diameter)) <= math.log(ASKED_SIZE_RATIO):
         return m
     stepped = measure_rays(luminance, clipped, xy, diameter, MIN_NOISE, 1.0)

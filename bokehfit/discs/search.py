@@ -10,9 +10,12 @@
 3. The circles through the photo's edges that no candidate measured (:func:`_circle_discs`),
    measured as places (:mod:`bokehfit.discs.places`); one the contour calls faint or cannot outline,
    kept where its own step along rays shows a ring all round (:func:`_ring_by_rays`).
-4. The discs whose contour runs into their neighbours' light measured again by their own step
+4. The circles of the sizes measured so far (:func:`_sized_discs`): discs at one depth are one size, and a
+   disc of a chain shows its own edge over part of its outline, enough to vote for its centre at a size
+   known (:func:`bokehfit.discs.circles.find_sized_circles`).
+5. The discs whose contour runs into their neighbours' light measured again by their own step
    (:func:`bokehfit.discs.places._by_own_steps`).
-5. The result (:func:`bokehfit.discs.disc._discs_of`): one per disc, largest first, each with
+6. The result (:func:`bokehfit.discs.disc._discs_of`): one per disc, largest first, each with
    what it offers.
 """
 
@@ -28,7 +31,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from bokehfit.discs.candidates import LARGE_DISC_PX, Candidate, find_candidates
-from bokehfit.discs.circles import find_circles
+from bokehfit.discs.circles import SIZE_STEP, find_circles, find_sized_circles
 from bokehfit.discs.disc import (
     SAME_DISC_CENTRE_REL,
     DiscSearch,
@@ -39,7 +42,14 @@ from bokehfit.discs.disc import (
     _same_size,
 )
 from bokehfit.discs.measure import RESOLVABLE_PX, Measurement, measure_candidate, split_cluster
-from bokehfit.discs.places import MIN_NOISE, _by_own_steps, _by_rays_after, _measure_place, _near_place
+from bokehfit.discs.places import (
+    MIN_NOISE,
+    _by_own_steps,
+    _by_rays_after,
+    _measure_place,
+    _near_place,
+    _nearer_the_asked,
+)
 from bokehfit.discs.rays import measure_rays
 from bokehfit.discs.reasons import NoDisc, Reason
 from bokehfit.discs.verdict import ring_all_round
@@ -88,6 +98,10 @@ BLOB_RAYS_AFTER = (Reason.FAINT, Reason.SOFT_EDGE)
 BLOB_RAYS_MIN_DIAMETER_PX = 2.0 * RESOLVABLE_PX
 #: Most circles through edges measured per photo (module bokehfit.discs.circles; the clearest first).
 MAX_CIRCLES = MAX_CANDIDATES // 10
+#: Most circles of the sizes found measured per photo (:func:`bokehfit.discs.circles.find_sized_circles`;
+#: those of the largest share of their length voting first). Each is measured in about 6 ms; twice as
+#: many found 3 more of the reference photos' 268 labelled discs (RESULTS.md).
+MAX_SIZED_CIRCLES = MAX_CANDIDATES // 20
 
 
 def find_discs(
@@ -134,6 +148,8 @@ def find_discs(
                                        rejected, rejections)
     found += _circle_discs(luminance, clipped, measurements, min_diameter_px, min(max_diameter_px, search_max_px),
                            rejected, rejections)
+    found += _sized_discs(luminance, clipped, measurements, min_diameter_px, min(max_diameter_px, search_max_px),
+                          rejected, rejections)
     measurements = _by_own_steps(luminance, clipped, measurements, min_diameter_px)
     return _discs_of(measurements, found, rejected, start, notes, rejections, max_discs)
 
@@ -313,22 +329,61 @@ def _circle_discs(luminance, clipped, measurements, min_diameter_px, max_diamete
     (:func:`_measure_place`), the clearest MAX_CIRCLES; kept where they pass the measurement's tests
     of a disc. Returns how many were measured."""
     places = find_circles(luminance, min_diameter_px, max_diameter_px)[:MAX_CIRCLES]
-    if not places:
-        return 0
     seen = [(m.center_xy, m.diameter_px) for m in measurements] + [(r.center_xy, r.diameter_px) for r in rejections]
+
+    def measure(xy, diameter):
+        rays_after = RAYS_AFTER if diameter >= RAYS_MIN_DIAMETER_PX else ()
+        m = _measure_place(luminance, clipped, xy, diameter, min_diameter_px, rays_after=rays_after)
+        if m.reason in RING_RAYS_AFTER and m.reason not in rays_after:
+            m = _ring_by_rays(luminance, clipped, m, xy, diameter, min_diameter_px)
+        return m
+
+    return _new_places(places, seen, measure, measurements, (min_diameter_px, max_diameter_px), rejected, rejections)
+
+
+def _sized_discs(luminance, clipped, measurements, min_diameter_px, max_diameter_px, rejected, rejections) -> int:
+    """Measure the circles of the sizes measured so far (:func:`bokehfit.discs.circles.find_sized_circles`:
+    the discs of a chain, or crossed by a twig, that show their own edge over part of their outline) that
+    no disc measured is, as places of that size, the clearest MAX_SIZED_CIRCLES: by the contour; by their
+    own step along rays where it calls them faint, as a circle through edges is (RAYS_AFTER, from
+    RAYS_MIN_DIAMETER_PX; from 16 px, the rays took more bright blobs that are not discs than discs:
+    RESULTS.md); and by that step where the contour's size is off the circle's (:func:`_nearer_the_asked`).
+    Kept where they pass the measurement's tests of a disc and are of the size sought (within SIZE_STEP: a
+    disc measured at another size there is another light, its neighbours' merged or a glow, not a disc of
+    that depth). A place a candidate was rejected at is measured again: the blob there was measured at its
+    own size, not the circle's. Returns how many were measured."""
+    found = find_sized_circles(luminance, [(m.center_xy, m.diameter_px) for m in measurements])
+    places = [(xy, d) for xy, d, _ in found]
+    places = [(xy, d) for xy, d in places if min_diameter_px <= d <= max_diameter_px][:MAX_SIZED_CIRCLES]
+
+    def measure(xy, diameter):
+        rays_after = RAYS_AFTER if diameter >= RAYS_MIN_DIAMETER_PX else ()
+        m = _measure_place(luminance, clipped, xy, diameter, min_diameter_px, rays_after=rays_after)
+        m = _nearer_the_asked(luminance, clipped, m, xy, diameter)
+        if isinstance(m, Measurement) and abs(math.log(m.diameter_px / diameter)) > math.log(SIZE_STEP):
+            return NoDisc(Reason.NOT_THE_DISC_ASKED, f"the disc measured there ({m.diameter_px:.0f} px) is not of"
+                          f" the size sought ({diameter:.0f} px)")
+        return m
+
+    seen = [(m.center_xy, m.diameter_px) for m in measurements]
+    return _new_places(places, seen, measure, measurements, (min_diameter_px, max_diameter_px), rejected, rejections)
+
+
+def _new_places(places, seen, measure, measurements, sizes, rejected, rejections) -> int:
+    """Measure (``measure(xy, diameter)``) each place that is not one of the ``seen`` ((xy, diameter):
+    the same disc), appending to ``measurements`` the discs of the ``sizes`` (least, most) that pass the
+    measurement's tests, and counting the others in ``rejected`` and ``rejections``. Returns how many were
+    measured."""
     known = cKDTree(np.array([xy for xy, _ in seen])) if seen else None
     measured = 0
     for xy, diameter in places:
         if known is not None and any(_same_size(seen[j][1], diameter)
                                      for j in known.query_ball_point(xy, SAME_DISC_CENTRE_REL * diameter)):
-            continue  # the blob search measured it (a disc, or not one)
+            continue  # measured already (a disc, or not one)
         measured += 1
-        rays_after = RAYS_AFTER if diameter >= RAYS_MIN_DIAMETER_PX else ()
-        m = _measure_place(luminance, clipped, xy, diameter, min_diameter_px, rays_after=rays_after)
-        if m.reason in RING_RAYS_AFTER and m.reason not in rays_after:
-            m = _ring_by_rays(luminance, clipped, m, xy, diameter, min_diameter_px)
+        m = measure(xy, diameter)
         why = m if isinstance(m, NoDisc) else m.reason
-        if why is None and not min_diameter_px <= m.diameter_px <= max_diameter_px:
+        if why is None and not sizes[0] <= m.diameter_px <= sizes[1]:
             why = Reason.TOO_LARGE
         if why is None:
             measurements.append(m)
