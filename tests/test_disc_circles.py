@@ -189,3 +189,18 @@ def test_rings_over_bright_foliage_are_kept_by_their_own_step(monkeypatch):
     assert rings_found(_ring_photo(1200, 1200, [], 48.0, **dense))[1] == 0
     monkeypatch.setattr(search, "RING_RAYS_AFTER", ())
     assert rings_found(image)[0] <= 1
+
+
+def test_a_circle_of_a_size_found_is_a_disc_of_a_chain_where_it_crosses_a_disc_measured():
+    """Where the circles of a size found are kept (:func:`bokehfit.discs.search._sized_discs`): those whose
+    outline crosses a measured disc's, as a disc of a chain does; not one apart, nor one around a smaller
+    disc or inside a larger one (a lit leaf about a disc, photo 09)."""
+    from bokehfit.discs.search import _Chain
+
+    chain = _Chain([((100.0, 100.0), 80.0), ((400.0, 100.0), 30.0)])
+    assert chain.crosses((160.0, 100.0), 80.0)  # the next disc of the chain, 60 px on
+    assert chain.crosses((100.0, 175.0), 80.0)  # overlapping it by 5 px
+    assert not chain.crosses((200.0, 100.0), 80.0)  # 20 px apart
+    assert not chain.crosses((402.0, 101.0), 72.0)  # around the 30-px disc
+    assert not chain.crosses((110.0, 100.0), 40.0)  # inside the 80-px disc
+    assert not _Chain([]).crosses((100.0, 100.0), 80.0)

@@ -10,9 +10,9 @@
 3. The circles through the photo's edges that no candidate measured (:func:`_circle_discs`),
    measured as places (:mod:`bokehfit.discs.places`); one the contour calls faint or cannot outline,
    kept where its own step along rays shows a ring all round (:func:`_ring_by_rays`).
-4. The circles of the sizes measured so far (:func:`_sized_discs`): discs at one depth are one size, and a
-   disc of a chain shows its own edge over part of its outline, enough to vote for its centre at a size
-   known (:func:`bokehfit.discs.circles.find_sized_circles`).
+4. The circles of the sizes measured so far that cross a measured disc's outline (:func:`_sized_discs`):
+   discs at one depth are one size, and a disc of a chain shows its own edge over part of its outline,
+   enough to vote for its centre at a size known (:func:`bokehfit.discs.circles.find_sized_circles`).
 5. The discs whose contour runs into their neighbours' light measured again by their own step
    (:func:`bokehfit.discs.places._by_own_steps`).
 6. The result (:func:`bokehfit.discs.disc._discs_of`): one per disc, largest first, each with
@@ -99,8 +99,7 @@ BLOB_RAYS_MIN_DIAMETER_PX = 2.0 * RESOLVABLE_PX
 #: Most circles through edges measured per photo (module bokehfit.discs.circles; the clearest first).
 MAX_CIRCLES = MAX_CANDIDATES // 10
 #: Most circles of the sizes found measured per photo (:func:`bokehfit.discs.circles.find_sized_circles`;
-#: those of the largest share of their length voting first). Each is measured in about 6 ms; twice as
-#: many found 3 more of the reference photos' 268 labelled discs (RESULTS.md).
+#: those of the largest share of their length voting first). Each is measured in about 6 ms.
 MAX_SIZED_CIRCLES = MAX_CANDIDATES // 20
 
 
@@ -342,31 +341,54 @@ def _circle_discs(luminance, clipped, measurements, min_diameter_px, max_diamete
 
 
 def _sized_discs(luminance, clipped, measurements, min_diameter_px, max_diameter_px, rejected, rejections) -> int:
-    """Measure the circles of the sizes measured so far (:func:`bokehfit.discs.circles.find_sized_circles`:
-    the discs of a chain, or crossed by a twig, that show their own edge over part of their outline) that
-    no disc measured is, as places of that size, the clearest MAX_SIZED_CIRCLES: by the contour; by their
-    own step along rays where it calls them faint, as a circle through edges is (RAYS_AFTER, from
-    RAYS_MIN_DIAMETER_PX; from 16 px, the rays took more bright blobs that are not discs than discs:
-    RESULTS.md); and by that step where the contour's size is off the circle's (:func:`_nearer_the_asked`).
-    Kept where they pass the measurement's tests of a disc and are of the size sought (within SIZE_STEP: a
-    disc measured at another size there is another light, its neighbours' merged or a glow, not a disc of
-    that depth). A place a candidate was rejected at is measured again: the blob there was measured at its
-    own size, not the circle's. Returns how many were measured."""
-    found = find_sized_circles(luminance, [(m.center_xy, m.diameter_px) for m in measurements])
-    places = [(xy, d) for xy, d, _ in found]
-    places = [(xy, d) for xy, d in places if min_diameter_px <= d <= max_diameter_px][:MAX_SIZED_CIRCLES]
+    """Measure the circles of the sizes measured so far (:func:`bokehfit.discs.circles.find_sized_circles`)
+    that are discs of a chain: each circle's outline crosses a measured disc's (:class:`_Chain`), where the
+    blob search sees the chain as one blob and a disc shows its own edge over part of its outline. The
+    clearest MAX_SIZED_CIRCLES of them that no disc measured is are measured as places of that size: by the
+    contour; by their own step along rays where it calls them faint, as a circle through edges is
+    (RAYS_AFTER, from RAYS_MIN_DIAMETER_PX; from 16 px, the rays took more bright blobs that are not discs
+    than discs: RESULTS.md); and by that step where the contour's size is off the circle's
+    (:func:`_nearer_the_asked`). Kept where they pass the measurement's tests of a disc and are the circle
+    voted for (its centre within SAME_DISC_CENTRE_REL of its diameter, its size within SIZE_STEP: another
+    measurement there is another light, its neighbours' merged or a glow) and still a disc of the chain.
+    A place a candidate was rejected at is measured again: the blob there was measured at its own size, not
+    the circle's. Returns how many were measured."""
+    seen = [(m.center_xy, m.diameter_px) for m in measurements]
+    chain = _Chain(seen)
+    found = find_sized_circles(luminance, seen)
+    places = [(xy, d) for xy, d, _ in found if min_diameter_px <= d <= max_diameter_px and chain.crosses(xy, d)]
 
     def measure(xy, diameter):
         rays_after = RAYS_AFTER if diameter >= RAYS_MIN_DIAMETER_PX else ()
         m = _measure_place(luminance, clipped, xy, diameter, min_diameter_px, rays_after=rays_after)
         m = _nearer_the_asked(luminance, clipped, m, xy, diameter)
-        if isinstance(m, Measurement) and abs(math.log(m.diameter_px / diameter)) > math.log(SIZE_STEP):
-            return NoDisc(Reason.NOT_THE_DISC_ASKED, f"the disc measured there ({m.diameter_px:.0f} px) is not of"
-                          f" the size sought ({diameter:.0f} px)")
+        if isinstance(m, Measurement) and not (abs(math.log(m.diameter_px / diameter)) <= math.log(SIZE_STEP)
+                                               and math.dist(m.center_xy, xy) <= SAME_DISC_CENTRE_REL * diameter
+                                               and chain.crosses(m.center_xy, m.diameter_px)):
+            return NoDisc(Reason.NOT_THE_DISC_ASKED, f"the disc measured there ({m.diameter_px:.0f} px at"
+                          f" {m.center_xy[0]:.0f}, {m.center_xy[1]:.0f}) is not the circle of a chain sought"
+                          f" ({diameter:.0f} px)")
         return m
 
-    seen = [(m.center_xy, m.diameter_px) for m in measurements]
-    return _new_places(places, seen, measure, measurements, (min_diameter_px, max_diameter_px), rejected, rejections)
+    return _new_places(places[:MAX_SIZED_CIRCLES], seen, measure, measurements, (min_diameter_px, max_diameter_px),
+                       rejected, rejections)
+
+
+class _Chain:
+    """The discs measured ((xy, diameter) each), asked whether a circle's outline crosses one of theirs: the
+    two circles overlap, neither inside the other (light adds, so each disc of a chain keeps its own edge)."""
+
+    def __init__(self, discs):
+        self._discs = discs
+        self._tree = cKDTree(np.array([xy for xy, _ in discs])) if discs else None
+        self._largest = max((d for _, d in discs), default=0.0)
+
+    def crosses(self, xy, diameter: float) -> bool:
+        if self._tree is None:
+            return False
+        near = self._tree.query_ball_point(xy, 0.5 * (diameter + self._largest))
+        return any(0.5 * abs(diameter - self._discs[j][1]) < math.dist(xy, self._discs[j][0])
+                   < 0.5 * (diameter + self._discs[j][1]) for j in near)
 
 
 def _new_places(places, seen, measure, measurements, sizes, rejected, rejections) -> int:
