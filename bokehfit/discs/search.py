@@ -346,8 +346,8 @@ def _sized_discs(luminance, clipped, measurements, min_diameter_px, max_diameter
     blob search sees the chain as one blob and a disc shows its own edge over part of its outline. The
     clearest MAX_SIZED_CIRCLES of them that no disc measured is are measured as places of that size: by the
     contour; by their own step along rays where it calls them faint, as a circle through edges is
-    (RAYS_AFTER, from RAYS_MIN_DIAMETER_PX; from 16 px, the rays took more bright blobs that are not discs
-    than discs: RESULTS.md); and by that step where the contour's size is off the circle's
+    (RAYS_AFTER, from RAYS_MIN_DIAMETER_PX; from 16 px, the rays added as many bright blobs that are not
+    discs to those the fit used as they found discs: RESULTS.md); and by that step where the contour's size is off the circle's
     (:func:`_nearer_the_asked`). Kept where they pass the measurement's tests of a disc and are the circle
     voted for (its centre within SAME_DISC_CENTRE_REL of its diameter, its size within SIZE_STEP: another
     measurement there is another light, its neighbours' merged or a glow) and still a disc of the chain.
