@@ -11,7 +11,12 @@ import pytest
 
 from bokehfit.apertures import make_aperture
 from bokehfit.discs import find_discs
-from bokehfit.discs.circles import MIN_DIAMETER_PX, SIZED_MIN_DISCS, find_circles, find_sized_circles
+from bokehfit.discs.circles import (
+    MIN_DIAMETER_PX,
+    SIZED_MIN_DISCS,
+    find_circles,
+    find_sized_circles,
+)
 from bokehfit.discs.labels import matches
 from bokehfit.synthetic import SyntheticDisc, render_discs
 

@@ -271,7 +271,7 @@ def _vote(copy: np.ndarray, radius: float) -> list[tuple[float, float, float, fl
         best = np.maximum(best, votes * np.float32(1.0 / (2.0 * math.pi * r)))
         votes_sum += votes
         radius_sum += np.float32(r) * votes
-    side = max(3, int(round(radius)) | 1)
+    side = max(3, round(radius) | 1)
     peaks = (best >= SIZED_MIN_SHARE) & (best >= cv2.dilate(best, np.ones((side, side), np.uint8)))
     py, px = np.nonzero(peaks)
     order = np.argsort(-best[py, px], kind="stable")

@@ -41,7 +41,12 @@ from bokehfit.discs.disc import (
     _discs_of,
     _same_size,
 )
-from bokehfit.discs.measure import RESOLVABLE_PX, Measurement, measure_candidate, split_cluster
+from bokehfit.discs.measure import (
+    RESOLVABLE_PX,
+    Measurement,
+    measure_candidate,
+    split_cluster,
+)
 from bokehfit.discs.places import (
     MIN_NOISE,
     _by_own_steps,
