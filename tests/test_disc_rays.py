@@ -12,8 +12,8 @@ import pytest
 from scipy import ndimage
 
 from bokehfit.discs import measure_discs_at
+from bokehfit.discs.candidates import MIN_NOISE
 from bokehfit.discs.measure import measure_candidate
-from bokehfit.discs.places import MIN_NOISE
 from bokehfit.discs.rays import measure_rays, pixel_noise
 from bokehfit.discs.reasons import NoDisc
 

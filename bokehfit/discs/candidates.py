@@ -109,7 +109,7 @@ CLUSTER_AREA_RATIO = 2.0
 #: little differently on the two reduced copies, is a candidate in at least one.
 BAND_OVERLAP_LOW = 0.8
 BAND_OVERLAP_HIGH = 1.25
-#: Noise floor (linear units).
+#: Noise floor (linear units): of the candidates' noise, and of every measurement's noise estimate.
 MIN_NOISE = 1e-4
 #: Pixels of a band's image searched at a time (whole rows, and the margins the opening and
 #: the blobs need): the search's temporaries stay a small share of the photo's own arrays.

@@ -19,6 +19,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from bokehfit.discs.candidates import MIN_NOISE
 from bokehfit.discs.disc import (
     MIN_FIT_SEEN,
     MIN_OUTLINE_SEEN,
@@ -35,8 +36,6 @@ from bokehfit.discs.measure import RESOLVABLE_PX, Measurement, measure_candidate
 from bokehfit.discs.rays import measure_rays
 from bokehfit.discs.reasons import NoDisc, Reason
 
-#: Noise floor of the local noise estimate (linear units).
-MIN_NOISE = 1e-4
 #: A person's disc whose contour comes out more than this factor off the size they read (the labels' own
 #: match: a diameter within 25 %) is measured again by its own step, and the measurement nearer that size is
 #: kept: a ring's contour outlines the light inside its rim, a disc of a chain the brightest overlap.
