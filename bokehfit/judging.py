@@ -53,6 +53,9 @@ def judge(fit: ApertureFit, metrics: dict[str, float | None]) -> tuple[list[str]
     fitted = len(fit.disc_fits)
     if fitted < MIN_SURE_DISCS:
         doubts.append(f"only {fitted} disc{' was' if fitted == 1 else 's were'} clean enough to fit")
+    elif _same_way_round(fit) < MIN_SURE_DISCS:
+        doubts.append(f"only {_same_way_round(fit)} of the {fitted} discs fitted show the aperture the same way round"
+                      " (the others turned by 180°, as discs before the focus plane do): too few to fix its angle")
     iou = metrics.get("iou")
     if iou is not None and iou < MIN_SURE_IOU:
         doubts.append(f"the discs match the kernel only loosely (median overlap IoU {iou:.2f}, {MIN_SURE_IOU} for a sure fit)")
@@ -72,6 +75,11 @@ def judge(fit: ApertureFit, metrics: dict[str, float | None]) -> tuple[list[str]
             f"(median overlap IoU {iou:.2f}, at least {MIN_ACCEPTABLE_IOU} needed)"
         )
     return doubts, rejection
+
+
+def _same_way_round(fit: ApertureFit) -> int:
+    """How many of the fitted discs show the aperture as the majority does, not turned by 180°."""
+    return sum(not item.turned for item in fit.disc_fits)
 
 
 def _small_and_faint(fit: ApertureFit) -> tuple[float, float] | None:
@@ -105,6 +113,8 @@ def short_doubts(fit: ApertureFit, metrics: dict[str, float | None]) -> list[str
     fitted = len(fit.disc_fits)
     if fitted < MIN_SURE_DISCS:
         words.append(f"only {fitted} disc{' is' if fitted == 1 else 's are'} clean enough")
+    elif _same_way_round(fit) < MIN_SURE_DISCS:
+        words.append(f"only {_same_way_round(fit)} discs show it the same way round")
     if fit.outline_misfit > REGULAR_OUTLINE_MISFIT:
         words.append("the discs' outlines are irregular")
     iou = metrics.get("iou")
