@@ -18,8 +18,9 @@ copies made here (8-bit, no metadata, so the f-stop is left out of the compariso
 Per copy it prints the status and the answer, and whether they agree with the original's:
 the same kind of status (an answer, fitted or unsure, or none), the same shape family, and
 the same lens features (rim's sign, vignetting, squeeze, chromatic) present or absent. A
-feature that appears on a degraded copy of a photo whose original had none is the failure
-the issue names (noise or JPEG made into a lens feature). It asserts nothing.
+feature that appears on a degraded copy of a photo whose original answer has none, and that the
+person's label does not read in it either (:func:`unread`), is the failure the issue names (noise
+or JPEG made into a lens feature); the summary counts those copies. It asserts nothing.
 """
 
 from __future__ import annotations
@@ -88,6 +89,22 @@ def reading(comparison) -> dict:
             "family": aperture.get("shape") if answered else None, "features": sorted(features)}
 
 
+def person_reads(label: dict) -> set[str]:
+    """The features (as :func:`reading` names them) that the person's label of a photo reads in its discs."""
+    reads = set()
+    if label.get("rim"):
+        reads.add("rim+" if label["rim"] == "positive" else "rim-")
+    if label.get("vignetting"):
+        reads.add("vignetting")
+    return reads
+
+
+def unread(original: dict, copy: dict, label: dict) -> list[str]:
+    """The features a copy's answer has that neither the original's answer nor the person's label has: what
+    JPEG, noise or a turn of the frame made, the failure the issue names."""
+    return sorted(set(copy["features"]) - set(original["features"]) - person_reads(label)) if copy["answered"] else []
+
+
 def agreement(original: dict, copy: dict) -> str:
     """'same', or what changed."""
     changes = []
@@ -137,13 +154,14 @@ def main(argv=None) -> int:
                 seen = reading(compare_photo(out))
                 verdict = agreement(original, seen)
                 tally[variant, verdict == "same"] += 1
-                tally["added", variant] += verdict.count("added")
+                tally["added", variant] += bool(unread(original, seen, entry.get("label") or {}))
                 print(f"  {variant:7s} {seen['answer']:32s} {seen['status']:9s} {verdict}  "
                       f"[{time.perf_counter() - start:.1f} s]")
                 row["copies"][variant] = {**seen, "agreement": verdict}
             rows.append(row)
     print("\nper variant: " + ", ".join(
         f"{v} {tally[v, True]}/{tally[v, True] + tally[v, False]} same, {tally['added', v]} with a feature added"
+        " that neither the original nor the person reads"
         for v in args.variants))
     print("target: every copy the same; no feature added by JPEG 60 or noise")
     if args.json:

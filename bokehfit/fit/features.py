@@ -3,7 +3,8 @@
 The rim where discs show a profile, the vignetting where outer discs misfit the shape more than
 central ones, the squeeze where the discs are stretched alike along the frame's axes
 (:func:`features_to_test`). A feature joins the model where it lowers the joint BIC by at least
-``FEATURE_DELTA_BIC``, shows (a rim of at least ``MIN_RIM``) and does not sit at the end of its
+``FEATURE_DELTA_BIC``, and by as much with any one disc left out (:func:`gain_without_one_disc`: the
+lens's, not one disc's), shows (a rim of at least ``MIN_RIM``) and does not sit at the end of its
 range (:func:`at_bound`). What each feature is (its parameters, start, bounds, least visible value)
 is its record in :data:`bokehfit.apertures.FEATURE_SPECS`; this module measures the discs' evidence.
 """
@@ -11,6 +12,7 @@ is its record in :data:`bokehfit.apertures.FEATURE_SPECS`; this module measures 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import cv2
 import numpy as np
@@ -21,14 +23,16 @@ from bokehfit.discs import Disc
 from bokehfit.fit.agreement import MIN_ELONGATED_DISCS
 from bokehfit.fit.crop import DiscCrop
 from bokehfit.fit.disc_model import render_disc_model
-from bokehfit.fit.pixels import PixelFit
+from bokehfit.fit.pixels import JointFit, PixelFit
 from bokehfit.fit.vector import FIT_BOUNDS
 from bokehfit.fit.signature import Screen
 
-__all__ = ["add_feature", "at_bound", "feature_evidence", "features_to_test", "FEATURE_DELTA_BIC", "MIN_RIM",
+__all__ = ["add_feature", "at_bound", "feature_evidence", "features_to_test", "gain_without_one_disc",
+           "FEATURE_DELTA_BIC", "MIN_RIM",
            "VIGNETTING_MIN_FIELD"]
 
-#: A §3b feature joins the model when it lowers the joint BIC by at least this (Kass & Raftery: "very strong").
+#: A §3b feature joins the model when it lowers the joint BIC by at least this (Kass & Raftery: "very strong"),
+#: and still by this much with any one of the jointly fitted discs left out (:func:`gain_without_one_disc`).
 FEATURE_DELTA_BIC = 10.0
 #: Vignetting is tried only when some fitted disc lies at least this far from the centre (half-diagonals) ...
 VIGNETTING_MIN_FIELD = 0.45
@@ -66,6 +70,32 @@ def at_bound(aperture: Aperture, feature: str) -> bool:
         if at_low or high - values[name] < 0.01 * span:
             return True
     return False
+
+
+def gain_without_one_disc(before: JointFit, after: JointFit, noise: Sequence[float]) -> float:
+    """The least BIC that a feature's fit ``after`` gains over ``before`` (the same discs, the same noise levels)
+    with any one disc left out: the discs' weighted residual sums taken over the others, the fits as they stand
+    (not refitted); -inf for a single disc.
+
+    A lens's feature is every disc's: its rim is in every disc's light, its cat-eye in every disc the barrel
+    reaches. A gain that one disc carries is that disc's quirk, not the lens's: its neighbour's light, a glow,
+    a rim of its own (a JPEG-60 copy of reference photo 05 gained a rim and a vignetting, a mirrored copy of
+    11 a vignetting, each from one disc whose own gain exceeded the whole).
+    """
+    if len(after.fits) < 2:
+        return -math.inf
+    weight = np.maximum(np.asarray(noise, dtype=np.float64), 1e-12) ** 2
+    rss_before = np.array([f.rss for f in before.fits]) / weight
+    rss_after = np.array([f.rss for f in after.fits]) / weight
+    pixels = np.array([f.pixels for f in after.fits], dtype=np.float64)
+    added = after.parameters - before.parameters
+    least = math.inf
+    for left_out in range(len(pixels)):
+        others = np.arange(len(pixels)) != left_out
+        n = float(pixels[others].sum())
+        gain = n * math.log(max(rss_before[others].sum(), 1e-300) / max(rss_after[others].sum(), 1e-300))
+        least = min(least, gain - added * math.log(n))
+    return least
 
 
 def feature_evidence(fits: list[PixelFit], discs: list[Disc]) -> FeatureEvidence:

@@ -30,7 +30,7 @@ from bokehfit.discs import Disc
 from bokehfit.fit.agreement import combine, consensus_start, disagreeing, outline_misfits, turned_discs, unsupported
 from bokehfit.fit.choice import choose_discs, slit_aspect
 from bokehfit.fit.families import FAMILIES, Family
-from bokehfit.fit.features import FEATURE_DELTA_BIC, add_feature, at_bound, features_to_test
+from bokehfit.fit.features import FEATURE_DELTA_BIC, add_feature, at_bound, features_to_test, gain_without_one_disc
 from bokehfit.fit.crop import DiscCrop, crop_disc
 from bokehfit.fit.pixels import JointFit, PixelFit, fit_discs
 from bokehfit.fit.result import CandidateModel, DiscFit, FitOptions
@@ -331,8 +331,8 @@ def fit_joint(chosen: Chosen, screened: Screened, consensus: Consensus, winner: 
 
 def try_features(joint: Joint, consensus: Consensus, winner: Family) -> Joint:
     """Stage 8: the §3b features the discs ask for, each tried on the joint fit and kept where it
-    gains FEATURE_DELTA_BIC, shows (its record's least visible value: a rim of at least MIN_RIM) and is
-    not at its bound."""
+    gains FEATURE_DELTA_BIC, with any one disc left out too (every disc's, not one disc's quirk), shows
+    (its record's least visible value: a rim of at least MIN_RIM) and is not at its bound."""
     ids = joint.ids
     tests = features_to_test([consensus.fits[i] for i in ids], joint.discs, [consensus.screens[i] for i in ids],
                              joint.joint_crops)
@@ -343,7 +343,8 @@ def try_features(joint: Joint, consensus: Consensus, winner: Family) -> Joint:
         trial = fit_discs(joint.joint_crops, winner, start, noise=joint.noise, disc_starts=best.disc_starts())
         gains[feature] = best.fit.bic - trial.bic
         visible = FEATURE_SPECS[feature].shows(trial.aperture)
-        if gains[feature] >= FEATURE_DELTA_BIC and visible and not at_bound(trial.aperture, feature):
+        if gains[feature] >= FEATURE_DELTA_BIC and visible and not at_bound(trial.aperture, feature) \
+                and gain_without_one_disc(best.fit, trial, joint.noise) >= FEATURE_DELTA_BIC:
             best = dataclasses.replace(best, fit=trial)
     return dataclasses.replace(best, tests=tests, gains=gains)
 

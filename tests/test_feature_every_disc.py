@@ -1,0 +1,82 @@
+"""A lens's §3b feature is every disc's: it joins the model only where it still gains
+FEATURE_DELTA_BIC with any one disc left out (bokehfit.fit.features.gain_without_one_disc).
+One ring among flat discs is that disc's own light (a drop's, a neighbour's), not the lens's rim."""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import cv2
+import numpy as np
+import pytest
+
+from bokehfit.discs import find_discs
+from bokehfit.fit import fit_aperture
+from bokehfit.fit.features import FEATURE_DELTA_BIC, gain_without_one_disc
+
+
+def _joint(rss: list[float], parameters: int, pixels: int = 1000):
+    """What gain_without_one_disc reads of a joint fit: each disc's RSS and pixels, the parameters."""
+    return SimpleNamespace(fits=[SimpleNamespace(rss=r, pixels=pixels) for r in rss], parameters=parameters)
+
+
+def test_a_gain_every_disc_shares_survives_leaving_one_out():
+    before, after = _joint([1000.0] * 4, 20), _joint([960.0] * 4, 21)
+    whole = 4000 * math.log(4000 / 3840) - math.log(4000)
+    least = gain_without_one_disc(before, after, [1.0] * 4)
+    assert least == pytest.approx(3000 * math.log(3000 / 2880) - math.log(3000))
+    assert FEATURE_DELTA_BIC <= least < whole
+
+
+def test_a_gain_one_disc_carries_does_not():
+    before, after = _joint([1000.0] * 4, 20), _joint([700.0, 1000.0, 1000.0, 1000.0], 21)
+    assert gain_without_one_disc(before, after, [1.0] * 4) < 0.0  # the others gain nothing, and pay the parameter
+
+
+def test_the_noise_levels_weigh_the_discs_as_the_joint_fit_does():
+    """Each disc's RSS counts over its noise level squared, as in the joint fit's weighted RSS: a disc whose
+    pixels are twice as noisy, with four times the RSS before and after, is the same evidence."""
+    rss_before, rss_after = [1000.0, 900.0, 1100.0], [950.0, 860.0, 1040.0]
+    plain = gain_without_one_disc(_joint(rss_before, 20), _joint(rss_after, 21), [1.0, 1.0, 1.0])
+    scaled = gain_without_one_disc(_joint([4 * rss_before[0], *rss_before[1:]], 20),
+                                   _joint([4 * rss_after[0], *rss_after[1:]], 21), [2.0, 1.0, 1.0])
+    unweighted = gain_without_one_disc(_joint([4 * rss_before[0], *rss_before[1:]], 20),
+                                       _joint([4 * rss_after[0], *rss_after[1:]], 21), [1.0, 1.0, 1.0])
+    assert scaled == pytest.approx(plain) and unweighted != pytest.approx(plain)
+
+
+def test_one_disc_carries_no_feature():
+    assert gain_without_one_disc(_joint([10.0], 5), _joint([1.0], 6), [1.0]) == -math.inf
+
+
+def _discs(rings: list[bool], diameter: float = 120.0, seed: int = 4) -> np.ndarray:
+    """Discs drawn by geometry, their centres 130 px apart in a row: a ring's centre 0.15 over the ground
+    rising to a rim of 0.65 at the edge, a flat disc 0.4 all over; blurred by 1 px, with noise."""
+    width, height = 130 * len(rings) + 40, 170
+    yy, xx = np.mgrid[0:height, 0:width].astype(np.float32)
+    image = np.full((height, width), 0.03, np.float32)
+    radius = 0.5 * diameter
+    for i, ring in enumerate(rings):
+        r = np.hypot(xx - (70.0 + 130.0 * i), yy - 85.0)
+        inside = np.clip(radius - r + 0.5, 0.0, 1.0)
+        light = 0.15 + 0.5 * np.clip((r - 0.5 * radius) / (0.45 * radius), 0.0, 1.0) if ring else 0.4
+        image += inside * light
+    image = cv2.GaussianBlur(image, (0, 0), 1.0)
+    return (image + np.random.default_rng(seed).normal(0.0, 0.004, image.shape)).astype(np.float32)
+
+
+def test_one_ring_among_flat_discs_is_no_rim_of_the_lens():
+    """Discs of 120 px, 10 px apart: fitted jointly, the ring alone gains a rim of +0.08 on every disc a ΔBIC
+    of 61, which one disc carries."""
+    image = _discs([True, False, False, False])
+    discs = find_discs(image).discs
+    assert sorted(d.ring for d in discs) == [False] * 3 + [True]
+    fit = fit_aperture(image, discs, shapes=["circle"])
+    assert "rim" not in fit.aperture.enabled_features, fit.message
+
+
+def test_rings_in_every_disc_are_the_lens_s_rim():
+    image = _discs([True] * 4, diameter=90.0)
+    fit = fit_aperture(image, find_discs(image).discs, shapes=["circle"])
+    assert "rim" in fit.aperture.enabled_features and fit.aperture.rim > 0.5, fit.message
