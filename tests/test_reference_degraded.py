@@ -27,22 +27,45 @@ def _benchmark():
     return module
 
 
-@pytest.mark.parametrize("variant", ["jpeg60", "noise"])
-@pytest.mark.parametrize("name", ["01_water-glints_canon6d_ef85.jpg", "04_juniper-droplet-rings_pablo-garcia-saldana.jpg",
-                                  "06_christmas-lights_nikon-d5300.jpg"])
-def test_a_degraded_copy_adds_no_lens_feature(compared, reference_photo, tmp_path, name, variant):
+def _copy_read(bench, reference_photo, tmp_path, name: str, variant: str) -> dict:
+    """The reading of ``compare`` on the ``variant`` copy of a reference photo (the benchmark's copy, its seed)."""
     from bokehfit.compare import compare_photo
 
-    bench = _benchmark()
-    original = bench.reading(compared(name))
     image = cv2.imread(str(reference_photo(name)), cv2.IMREAD_COLOR)
     copy, suffix = bench.degrade(image, variant, np.random.default_rng(bench.SEED))
     out = tmp_path / f"copy{suffix}"
     assert cv2.imwrite(str(out), copy, [cv2.IMWRITE_JPEG_QUALITY, 60] if suffix == ".jpg" else [])
-    seen = bench.reading(compare_photo(out))
+    return bench.reading(compare_photo(out))
+
+
+def _label(bench, name: str) -> dict:
+    return next(e for e in json.loads(bench.MANIFEST.read_text(encoding="utf-8"))["photos"] if e["file"] == name)["label"]
+
+
+@pytest.mark.parametrize("variant", ["jpeg60", "noise"])
+@pytest.mark.parametrize("name", ["01_water-glints_canon6d_ef85.jpg", "04_juniper-droplet-rings_pablo-garcia-saldana.jpg",
+                                  "06_christmas-lights_nikon-d5300.jpg"])
+def test_a_degraded_copy_adds_no_lens_feature(compared, reference_photo, tmp_path, name, variant):
+    bench = _benchmark()
+    original = bench.reading(compared(name))
+    seen = _copy_read(bench, reference_photo, tmp_path, name, variant)
     assert seen["answered"] == original["answered"] and seen["family"] == original["family"], (original, seen)
-    label = next(e for e in json.loads(bench.MANIFEST.read_text(encoding="utf-8"))["photos"] if e["file"] == name)["label"]
-    added = bench.unread(original, seen, label)
+    added = bench.unread(original, seen, _label(bench, name))
     assert not added, f"{variant} made {added} of a photo that shows none: {original} -> {seen}"
     if name.startswith("04"):  # the soap-bubble rims the person reads are kept
         assert "rim+" in seen["features"], seen
+
+
+@pytest.mark.parametrize("variant", ["jpeg60", "noise"])
+@pytest.mark.parametrize("name", ["05_backlit-grass_unsplash-522b53fb137bb.jpg", "15_water-web_tom-kijas.jpg"])
+def test_a_weak_photo_s_copy_is_no_surer_and_adds_no_feature(compared, reference_photo, tmp_path, name, variant):
+    """Photos whose labels call them weak (faint, soft discs): a copy's answer may waver, but it is not sure of
+    another shape, and JPEG or noise adds no feature the label does not read. Before the discs of a sure angle
+    had to show it the same way round, 15's JPEG-60 copy was a sure rounded triangle; before a feature had to
+    hold with any one disc left out, 05's gained a rim and a vignetting, each one disc's."""
+    bench = _benchmark()
+    original = bench.reading(compared(name))
+    seen = _copy_read(bench, reference_photo, tmp_path, name, variant)
+    assert seen["status"] != "fitted" or seen["family"] == original["family"], (original, seen)
+    added = bench.unread(original, seen, _label(bench, name))
+    assert not added, f"{variant} made {added} of a photo that shows none: {original} -> {seen}"
