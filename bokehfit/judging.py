@@ -50,11 +50,11 @@ def judge(fit: ApertureFit, metrics: dict[str, float | None]) -> tuple[list[str]
     if fit.outline_misfit > REGULAR_OUTLINE_MISFIT:
         doubts.append(f"the discs' outlines are irregular (median misfit {fit.outline_misfit:.2f} of their radius to the "
                       f"best shape, {REGULAR_OUTLINE_MISFIT} for a sure fit): blobs that say little about the aperture")
-    fitted = len(fit.disc_fits)
+    fitted, same_way = len(fit.disc_fits), _same_way_round(fit)
     if fitted < MIN_SURE_DISCS:
         doubts.append(f"only {fitted} disc{' was' if fitted == 1 else 's were'} clean enough to fit")
-    elif _same_way_round(fit) < MIN_SURE_DISCS:
-        doubts.append(f"only {_same_way_round(fit)} of the {fitted} discs fitted show the aperture the same way round"
+    elif same_way < MIN_SURE_DISCS:
+        doubts.append(f"only {same_way} of the {fitted} discs fitted show the aperture the same way round"
                       " (the others turned by 180°, as discs before the focus plane do): too few to fix its angle")
     iou = metrics.get("iou")
     if iou is not None and iou < MIN_SURE_IOU:
@@ -110,11 +110,11 @@ def short_doubts(fit: ApertureFit, metrics: dict[str, float | None]) -> list[str
     words = []
     if fit.close_runner_up:
         words.append(f"{article(fit.runner_up.family.aperture.display_name)} fits almost as well")
-    fitted = len(fit.disc_fits)
+    fitted, same_way = len(fit.disc_fits), _same_way_round(fit)
     if fitted < MIN_SURE_DISCS:
         words.append(f"only {fitted} disc{' is' if fitted == 1 else 's are'} clean enough")
-    elif _same_way_round(fit) < MIN_SURE_DISCS:
-        words.append(f"only {_same_way_round(fit)} discs show it the same way round")
+    elif same_way < MIN_SURE_DISCS:
+        words.append(f"only {same_way} discs show it the same way round")
     if fit.outline_misfit > REGULAR_OUTLINE_MISFIT:
         words.append("the discs' outlines are irregular")
     iou = metrics.get("iou")
