@@ -166,6 +166,21 @@ def test_overlapping_discs_are_flagged():
     assert all(d.usable == (d.outline_seen >= MIN_FIT_SEEN) for d in search.discs)
 
 
+def test_points_within_an_outline_are_those_opencv_finds():
+    """The overlap test's bounding-box shortcut gives OpenCV's answer for every point, near the box or far."""
+    from bokehfit.discs.disc import _within_outline
+
+    rng = np.random.default_rng(7)
+    for _ in range(20):
+        angles = np.sort(rng.uniform(0.0, 2.0 * math.pi, 40))
+        radii = rng.uniform(20.0, 40.0, 40)
+        outline = np.column_stack([100.0 + radii * np.cos(angles), 90.0 + radii * np.sin(angles)])
+        points = rng.uniform(40.0, 160.0, (400, 2))
+        polygon = outline.astype(np.float32)
+        expected = [cv2.pointPolygonTest(polygon, (float(x), float(y)), True) >= -1.5 for x, y in points]
+        assert _within_outline(points, outline, 1.5).tolist() == expected
+
+
 def test_star_is_not_taken_for_overlapping_discs():
     search = find_discs(render_discs(160, 160, [SyntheticDisc((80.2, 79.6), 90, make_aperture("star", 7))]))
     assert len(search) == 1 and not search.discs[0].overlaps

@@ -329,10 +329,7 @@ def _own_outlines(measurements: list[Measurement]) -> tuple[list[np.ndarray], li
             for j in tree.query_ball_point(m.center_xy, reach[i] + reach.max() + OVERLAP_MARGIN_PX):
                 if j == i or np.hypot(*(centres[j] - centres[i])) > reach[i] + reach[j] + OVERLAP_MARGIN_PX:
                     continue
-                other = measurements[j].outline_xy.astype(np.float32)
-                inside = np.array(
-                    [cv2.pointPolygonTest(other, (float(x), float(y)), True) >= -OVERLAP_MARGIN_PX for x, y in m.outline_xy]
-                )
+                inside = _within_outline(m.outline_xy, measurements[j].outline_xy, OVERLAP_MARGIN_PX)
                 if inside.any():
                     if not m.own_step:  # a contour through the sum of two discs' light is neither's edge
                         own[i] &= ~inside
@@ -342,6 +339,19 @@ def _own_outlines(measurements: list[Measurement]) -> tuple[list[np.ndarray], li
     numbers: dict[int, int] = {}
     clusters = [numbers.setdefault(r, len(numbers)) if sizes[r] > 1 else None for r in roots]
     return own, clusters
+
+
+def _within_outline(points: np.ndarray, outline: np.ndarray, margin_px: float) -> np.ndarray:
+    """Per point of ``points`` (N, 2): inside the closed ``outline`` or within ``margin_px`` of it. Only the
+    points within the margin of the outline's bounding box are tested (the others lie farther from it)."""
+    low, high = outline.min(axis=0) - margin_px - 1.0, outline.max(axis=0) + margin_px + 1.0
+    near = np.all((points >= low) & (points <= high), axis=1)
+    inside = np.zeros(len(points), dtype=bool)
+    if near.any():
+        polygon = outline.astype(np.float32)
+        inside[near] = [cv2.pointPolygonTest(polygon, (float(x), float(y)), True) >= -margin_px
+                        for x, y in points[near]]
+    return inside
 
 
 def _same_size(diameter_px: float, other_px: float) -> bool:
