@@ -27,13 +27,19 @@ __all__ = ["polygon_area_centroid"]
 _SUBPIXEL = 16
 
 
-def _edge_gradient(crop: np.ndarray, outline: np.ndarray) -> float:
-    """Median gradient magnitude of the image along the outline (bilinear samples)."""
-    gy, gx = np.gradient(crop.astype(np.float32))
+def _edge_gradient(crop: np.ndarray, outline: np.ndarray, gradients: tuple[np.ndarray, np.ndarray] | None = None) -> float:
+    """Median gradient magnitude of the image along the outline (bilinear samples); ``gradients``, the
+    crop's (rows, columns) gradients where the caller has them already (:func:`_crop_gradients`)."""
+    gy, gx = _crop_gradients(crop) if gradients is None else gradients
     coords = [outline[:, 1], outline[:, 0]]  # (row, col)
     gx_at = ndimage.map_coordinates(gx, coords, order=1, mode="nearest")
     gy_at = ndimage.map_coordinates(gy, coords, order=1, mode="nearest")
     return float(_median(np.hypot(gx_at, gy_at)))
+
+
+def _crop_gradients(crop: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The crop's gradients along its rows and columns (float32), as :func:`_edge_gradient` samples them."""
+    return tuple(np.gradient(crop.astype(np.float32)))
 
 
 def _outline(crop: np.ndarray, level: float, background: float, seed_rc: tuple[float, float]) -> np.ndarray | None:

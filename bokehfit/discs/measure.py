@@ -36,7 +36,7 @@ from dataclasses import replace
 import numpy as np
 
 from bokehfit.discs.clusters import split_cluster
-from bokehfit.discs.contours import _edge_gradient, _open_in_window, _outline, polygon_area_centroid
+from bokehfit.discs.contours import _crop_gradients, _edge_gradient, _open_in_window, _outline, polygon_area_centroid
 from bokehfit.discs.gaps import OCCLUSION_BRIDGE_REL, OCCLUSION_MIN_SHARE
 from bokehfit.discs.levels import MIN_SNR, Window, _annulus_levels, _levelled, _percentile
 from bokehfit.discs.outlines import RING_CORE_REL, Outlined, _closed_outline, _two_passes
@@ -155,10 +155,10 @@ def _step_share(found: Outlined) -> float | None:
     background, plateau = found.levels.background, found.levels.plateau
     contrast = plateau - background
     _, cx, cy = polygon_area_centroid(outline)
-    steepness = []
+    steepness, gradients = [], _crop_gradients(crop)  # one crop, ten levels
     for share in BRIGHT_CENTRE_LEVELS:
         contour = _outline(crop, background + share * contrast, background, (cy, cx))
-        steepness.append(0.0 if contour is None else _edge_gradient(crop, contour))
+        steepness.append(0.0 if contour is None else _edge_gradient(crop, contour, gradients))
     best = int(np.argmax(steepness))
     share, steepest = BRIGHT_CENTRE_LEVELS[best], steepness[best]
     if share > BRIGHT_CENTRE_MAX_LEVEL:
