@@ -3,7 +3,8 @@
 1. The candidates (:func:`_candidates`): bright blobs above the local background
    (:mod:`bokehfit.discs.candidates`), one per place and size (:func:`_distinct`), within the limits
    (MAX_CLUSTER_CANDIDATES, MAX_CANDIDATES: the clearest first), largest first.
-2. Each candidate measured (:func:`_measure_candidates`), a larger disc first claiming the candidates
+2. Each candidate measured (:func:`_measure_candidates`; a large one on the photo area-averaged,
+   :mod:`bokehfit.discs.scales`), a larger disc first claiming the candidates
    inside it (:class:`_OutlineGrid`): a cluster as a whole, split into its discs
    (:func:`_measure_cluster`); a blob by its contour and, where that calls it faint or soft-edged,
    by its own step along rays (:func:`_measure_blob`).
@@ -30,7 +31,12 @@ import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 
-from bokehfit.discs.candidates import LARGE_DISC_PX, MIN_NOISE, Candidate, find_candidates
+from bokehfit.discs.candidates import (
+    LARGE_DISC_PX,
+    MIN_NOISE,
+    Candidate,
+    find_candidates,
+)
 from bokehfit.discs.circles import SIZE_STEP, find_circles, find_sized_circles
 from bokehfit.discs.disc import (
     SAME_DISC_CENTRE_REL,
@@ -56,6 +62,7 @@ from bokehfit.discs.places import (
 )
 from bokehfit.discs.rays import measure_rays
 from bokehfit.discs.reasons import NoDisc, Reason
+from bokehfit.discs.scales import PhotoScales
 from bokehfit.discs.verdict import ring_all_round
 
 #: Smallest disc the detector seeks by default (``bokehfit discs``): glints from 4 px are counted.
@@ -248,14 +255,15 @@ def _measure_candidates(luminance, clipped, candidates: list[Candidate], min_dia
 
         iterator = tqdm(candidates, desc="measuring discs", unit="candidate", leave=False)
     grid = _OutlineGrid(max(16.0, 4.0 * min_diameter_px))
+    scales = PhotoScales(luminance, clipped)
     measurements: list[Measurement] = []
     for candidate in iterator:
         if grid.contains(candidate.center_xy):
             measured = Rejection.of(candidate.center_xy, candidate.diameter_px, Reason.INSIDE_LARGER_DISC)
         elif candidate.cluster:
-            measured = _measure_cluster(luminance, clipped, candidate, min_diameter_px, max_diameter_px)
+            measured = _measure_cluster(scales, candidate, min_diameter_px, max_diameter_px)
         else:
-            measured = _measure_blob(luminance, clipped, candidate, min_diameter_px, max_diameter_px)
+            measured = _measure_blob(scales, candidate, min_diameter_px, max_diameter_px)
         if isinstance(measured, Rejection):
             rejected[measured.rejected_because] += 1
             rejections.append(measured)
@@ -290,12 +298,22 @@ class _OutlineGrid:
 
 
 
-def _measure_cluster(luminance, clipped, candidate: Candidate, min_diameter_px: float,
+def _measured_at_scale(scales: PhotoScales, candidate: Candidate, min_diameter_px: float,
+                       cluster: bool = False) -> Measurement | NoDisc:
+    """The candidate measured by its contour (:func:`bokehfit.discs.measure.measure_candidate`) at the scale
+    its size needs (:mod:`bokehfit.discs.scales`), in the photo's pixels."""
+    factor = scales.factor(candidate.diameter_px)
+    luminance, clipped = scales.at(factor)
+    m = measure_candidate(luminance, clipped, scales.to_copy(candidate.center_xy, factor), candidate.diameter_px / factor,
+                          candidate.extent_px / factor, MIN_NOISE, min_diameter_px / factor, cluster=cluster)
+    return m if factor == 1 or isinstance(m, NoDisc) else m.enlarged(factor)
+
+
+def _measure_cluster(scales: PhotoScales, candidate: Candidate, min_diameter_px: float,
                      max_diameter_px: float) -> _Measured | Rejection:
     """A cluster candidate measured as a whole and split into its discs of the sizes sought; a
     rejection (``Reason.NOT_A_CLUSTER``) where it has none."""
-    m = measure_candidate(luminance, clipped, candidate.center_xy, candidate.diameter_px, candidate.extent_px,
-                          MIN_NOISE, min_diameter_px, cluster=True)
+    m = _measured_at_scale(scales, candidate, min_diameter_px, cluster=True)
     parts = [] if isinstance(m, NoDisc) else split_cluster(m)
     parts = [p for p in parts if min_diameter_px <= p.diameter_px <= max_diameter_px]
     if parts:
@@ -304,15 +322,15 @@ def _measure_cluster(luminance, clipped, candidate: Candidate, min_diameter_px: 
     return Rejection.of(candidate.center_xy, candidate.diameter_px, Reason.NOT_A_CLUSTER)
 
 
-def _measure_blob(luminance, clipped, candidate: Candidate, min_diameter_px: float,
+def _measure_blob(scales: PhotoScales, candidate: Candidate, min_diameter_px: float,
                   max_diameter_px: float) -> _Measured | Rejection:
-    """A blob candidate measured by its contour and, from BLOB_RAYS_MIN_DIAMETER_PX where the contour
-    calls it one of BLOB_RAYS_AFTER, by its own step along rays (:func:`bokehfit.discs.places._by_rays_after`);
-    a rejection, where it was measured, where it is no disc of the sizes sought."""
-    m = measure_candidate(luminance, clipped, candidate.center_xy, candidate.diameter_px, candidate.extent_px,
-                          MIN_NOISE, min_diameter_px)
+    """A blob candidate measured by its contour (at the scale its size needs) and, from
+    BLOB_RAYS_MIN_DIAMETER_PX where the contour calls it one of BLOB_RAYS_AFTER, by its own step along rays
+    (:func:`bokehfit.discs.places._by_rays_after`); a rejection, where it was measured, where it is no disc
+    of the sizes sought."""
+    m = _measured_at_scale(scales, candidate, min_diameter_px)
     if isinstance(m, Measurement) and candidate.diameter_px >= BLOB_RAYS_MIN_DIAMETER_PX:
-        m = _by_rays_after(luminance, clipped, m, candidate.center_xy, candidate.diameter_px,
+        m = _by_rays_after(scales.luminance, scales.clipped, m, candidate.center_xy, candidate.diameter_px,
                            min_diameter_px, BLOB_RAYS_AFTER)
     if isinstance(m, NoDisc):
         return Rejection.of(candidate.center_xy, candidate.diameter_px, m)

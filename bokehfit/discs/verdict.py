@@ -46,7 +46,7 @@ What a kept disc offers (for the fit that comes later):
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -125,6 +125,15 @@ class Measurement:
     #: The outline was traced along rays as the disc's own step down (:mod:`bokehfit.discs.rays`): light
     #: adds, so its seen points are the disc's edge inside other discs' light too.
     own_step: bool = False
+
+    def enlarged(self, factor: int) -> Measurement:
+        """This measurement, made on the photo area-averaged ``factor`` × ``factor``
+        (:mod:`bokehfit.discs.scales`), in the photo's pixels: a copy pixel's centre c is the photo's
+        factor · c + (factor − 1) / 2."""
+        shift = 0.5 * (factor - 1)
+        return replace(self, center_xy=(factor * self.center_xy[0] + shift, factor * self.center_xy[1] + shift),
+                       diameter_px=factor * self.diameter_px, area_px=factor * factor * self.area_px,
+                       outline_xy=factor * self.outline_xy + shift, edge_width_px=factor * self.edge_width_px)
 
 
 def describe(luminance, clipped_mask, found: Outlined, min_noise, min_diameter_px) -> Measurement:

@@ -1,0 +1,71 @@
+"""Large candidates measured at the scale their outline needs: on the photo area-averaged.
+
+Notes
+-----
+A candidate's measurement (:func:`bokehfit.discs.measure.measure_candidate`) works on windows of
+about 3.4 times its radius a side, grown while its outline runs into them: its work grows with the
+square of its size. A disc's outline and levels need no more than a few hundred pixels of outline
+to be drawn well: from ``2 · MEASURE_SIDE_PX`` on, a blob candidate of the search is measured on
+the photo area-averaged by ``k = ⌊D / MEASURE_SIDE_PX⌋`` (``k × k`` pixels a pixel), where it is
+``MEASURE_SIDE_PX`` to ``2 · MEASURE_SIDE_PX`` across, and its measurement is put back in the
+photo's pixels (:meth:`bokehfit.discs.verdict.Measurement.enlarged`). The fit measures every disc
+afresh on the photo's own pixels; a person's places (``compare --discs``) and the circles through
+edges are measured at full resolution.
+
+What the copy changes: the surround's noise is that of the averaged pixels (white noise falls k
+times, texture at the disc's scale does not), so ``snr`` is the disc's at the scale it was measured;
+a copy pixel is clipped where any of its pixels is; the last ``k − 1`` rows and columns of the photo
+(the remainder of its size over ``k``) are not in the copy, so a disc that reaches that strip is
+cut by the copy's frame there.
+
+Measured on the 17 reference photos (``benchmarks/RESULTS.md``, 2026-11-29): the search 6–7 % less
+CPU, the same discs' recall, the same answers but one (photo 11: a third disc fitted, fitted → right);
+at ``MEASURE_SIDE_PX`` = 96 (k = 2 from 192 px) 13 % less, but the fitted rims of photos 04 and 07
+moved (+0.38 → +0.34 and +0.26): the measurement's flags and outline start the fit.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+__all__ = ["PhotoScales", "MEASURE_SIDE_PX"]
+
+#: A candidate is measured on the photo area-averaged by ⌊D / MEASURE_SIDE_PX⌋ where that is 2 or more.
+MEASURE_SIDE_PX = 128.0
+
+
+class PhotoScales:
+    """A photo's luminance and clipping with their area-averaged copies, each made when first asked
+    for (one search's, dropped with it)."""
+
+    def __init__(self, luminance: np.ndarray, clipped: np.ndarray | None):
+        self.luminance = luminance
+        self.clipped = clipped
+        self._copies: dict[int, tuple[np.ndarray, np.ndarray | None]] = {}
+
+    @staticmethod
+    def factor(diameter_px: float) -> int:
+        """The averaging a candidate of ``diameter_px`` is measured at (1: the photo itself)."""
+        return max(1, int(diameter_px // MEASURE_SIDE_PX))
+
+    def at(self, factor: int) -> tuple[np.ndarray, np.ndarray | None]:
+        """The luminance and clipping averaged ``factor`` × ``factor`` (the photo's own at 1)."""
+        if factor <= 1:
+            return self.luminance, self.clipped
+        if factor not in self._copies:
+            height, width = (side // factor for side in self.luminance.shape)
+            whole = np.ascontiguousarray(self.luminance[: height * factor, : width * factor], dtype=np.float32)
+            copy = cv2.resize(whole, (width, height), interpolation=cv2.INTER_AREA)
+            clipped = None
+            if self.clipped is not None:
+                blocks = self.clipped[: height * factor, : width * factor].reshape(height, factor, width, factor)
+                clipped = blocks.any(axis=(1, 3))
+            self._copies[factor] = (copy, clipped)
+        return self._copies[factor]
+
+    @staticmethod
+    def to_copy(xy: tuple[float, float], factor: int) -> tuple[float, float]:
+        """A point of the photo in the pixels of the copy averaged by ``factor``."""
+        shift = 0.5 * (factor - 1)
+        return ((xy[0] - shift) / factor, (xy[1] - shift) / factor)
