@@ -36,7 +36,8 @@ def test_a_copy_pixel_is_the_mean_of_its_block_and_clipped_where_any_is():
     blocks = luminance[:99, :75].reshape(33, 3, 25, 3)
     np.testing.assert_allclose(copy, blocks.mean(axis=(1, 3)), rtol=1e-6)
     assert (clipped_copy == clipped[:99, :75].reshape(33, 3, 25, 3).any(axis=(1, 3))).all()
-    assert scales.at(3)[0] is copy  # made once
+    assert scales.at(3)[0] is copy  # made once while it is the one asked for
+    assert scales.at(2)[0].shape == (50, 38) and scales.at(3)[0] is not copy  # one copy held at a time
 
 
 def test_the_factor_keeps_a_disc_at_least_measure_side_across():

@@ -36,13 +36,15 @@ MEASURE_SIDE_PX = 128.0
 
 
 class PhotoScales:
-    """A photo's luminance and clipping with their area-averaged copies, each made when first asked
-    for (one search's, dropped with it)."""
+    """A photo's luminance and clipping with an area-averaged copy, made when asked for and kept until
+    another is (one search's, dropped with it). The search measures its candidates largest first, so the
+    factors it asks for only fall: each copy is made once, and one at a time is held (at most a quarter
+    of the photo's pixels)."""
 
     def __init__(self, luminance: np.ndarray, clipped: np.ndarray | None):
         self.luminance = luminance
         self.clipped = clipped
-        self._copies: dict[int, tuple[np.ndarray, np.ndarray | None]] = {}
+        self._copy: tuple[int, np.ndarray, np.ndarray | None] | None = None
 
     @staticmethod
     def factor(diameter_px: float) -> int:
@@ -53,7 +55,8 @@ class PhotoScales:
         """The luminance and clipping averaged ``factor`` × ``factor`` (the photo's own at 1)."""
         if factor <= 1:
             return self.luminance, self.clipped
-        if factor not in self._copies:
+        if self._copy is None or self._copy[0] != factor:
+            self._copy = None  # the last copy goes before the next is made
             height, width = (side // factor for side in self.luminance.shape)
             whole = np.ascontiguousarray(self.luminance[: height * factor, : width * factor], dtype=np.float32)
             copy = cv2.resize(whole, (width, height), interpolation=cv2.INTER_AREA)
@@ -61,8 +64,8 @@ class PhotoScales:
             if self.clipped is not None:
                 blocks = self.clipped[: height * factor, : width * factor].reshape(height, factor, width, factor)
                 clipped = blocks.any(axis=(1, 3))
-            self._copies[factor] = (copy, clipped)
-        return self._copies[factor]
+            self._copy = (factor, copy, clipped)
+        return self._copy[1], self._copy[2]
 
     @staticmethod
     def to_copy(xy: tuple[float, float], factor: int) -> tuple[float, float]:
