@@ -31,12 +31,7 @@ import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 
-from bokehfit.discs.candidates import (
-    LARGE_DISC_PX,
-    MIN_NOISE,
-    Candidate,
-    find_candidates,
-)
+from bokehfit.discs.candidates import LARGE_DISC_PX, MIN_NOISE, Candidate, find_candidates
 from bokehfit.discs.circles import SIZE_STEP, find_circles, find_sized_circles
 from bokehfit.discs.disc import (
     SAME_DISC_CENTRE_REL,
