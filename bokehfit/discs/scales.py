@@ -19,9 +19,10 @@ a copy pixel is clipped where any of its pixels is; the last ``k − 1`` rows an
 cut by the copy's frame there.
 
 Measured on the 17 reference photos (``benchmarks/RESULTS.md``, 2026-11-29): the search 6–7 % less
-CPU, the same discs' recall, the same answers but one (photo 11: a third disc fitted, fitted → right);
-at ``MEASURE_SIDE_PX`` = 96 (k = 2 from 192 px) 13 % less, but the fitted rims of photos 04 and 07
-moved (+0.38 → +0.34 and +0.26): the measurement's flags and outline start the fit.
+CPU, recall of the labelled discs 135 → 136 of 268, the same answers but one (photo 11: a third disc
+fitted, unsure → fitted, right); at ``MEASURE_SIDE_PX`` = 96 (k = 2 from 192 px) 13 % less, but the
+fitted rims of photos 04 and 07 moved (+0.38 → +0.34 and +0.26): which discs the fit takes first, and
+what their measurement says of them, starts it.
 """
 
 from __future__ import annotations
