@@ -59,7 +59,8 @@ class PhotoScales:
         if self._copy is None or self._copy[0] != factor:
             self._copy = None  # the last copy goes before the next is made
             height, width = (side // factor for side in self.luminance.shape)
-            whole = np.ascontiguousarray(self.luminance[: height * factor, : width * factor], dtype=np.float32)
+            # A view (OpenCV reads its rows where they lie): no temporary the size of the photo.
+            whole = self.luminance[: height * factor, : width * factor].astype(np.float32, copy=False)
             copy = cv2.resize(whole, (width, height), interpolation=cv2.INTER_AREA)
             clipped = None
             if self.clipped is not None:
