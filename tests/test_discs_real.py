@@ -156,43 +156,6 @@ def test_disc_crossed_by_a_branch_is_kept_with_the_crossing_unseen():
     assert to_line.max() < 8.0
 
 
-@pytest.mark.parametrize("bridged_at", ["a branch across", "the edge all round"])
-def test_bridged_pixels_hide_the_outline_where_they_are_gaps_not_where_they_follow_the_edge(bridged_at):
-    """The pixels a closing raised mark the outline next to them unseen where they are gaps in its edge (a thin
-    occluder crosses it at two places); where they lie along more than MAX_BRIDGED_SHARE of it, the closing
-    followed the edge itself (notches all round a faint disc's region), and the outline is the disc's own."""
-    from bokehfit.discs.levels import Levels, Window
-    from bokehfit.discs.outlines import Outlined
-    from bokehfit.discs.verdict import MAX_BRIDGED_SHARE, describe
-
-    size, centre, radius = 140, (70.0, 70.0), 45.0
-    rows, cols = np.mgrid[0:size, 0:size].astype(np.float32)
-    distance = np.hypot(cols - centre[0], rows - centre[1])
-    crop = (0.1 + 0.5 * np.clip(radius + 0.5 - distance, 0.0, 1.0)).astype(np.float32)  # a sharp flat disc
-    angles = np.linspace(0.0, 2.0 * np.pi, 240, endpoint=False)
-    outline = np.column_stack([centre[0] + radius * np.cos(angles), centre[1] + radius * np.sin(angles)])
-    if bridged_at == "a branch across":
-        bridged = (np.abs(rows - cols) < 4.0) & (distance <= radius)  # a band 5-6 px wide through the centre
-    else:
-        bridged = (distance <= radius) & (distance > radius - 4.0) & (np.cos(np.arctan2(rows - 70, cols - 70) * 12) > -0.3)
-    found = Outlined(Window(0, 0, size, size), crop, Levels(0.1, 0.6, 0.005, 0.0), outline, False, bridged,
-                     np.zeros(len(outline), dtype=bool))
-    m = describe(crop, None, found, 1e-4, 4.0)
-    assert m.reason is None
-    seen = float(m.outline_reliable.mean())
-    if bridged_at == "a branch across":
-        assert m.occluded and 0.85 < seen < 0.98, seen
-    else:
-        assert not m.occluded and seen == 1.0
-        assert _near_share(bridged, outline) > MAX_BRIDGED_SHARE  # the case the constant is for
-
-
-def _near_share(mask, outline):
-    from bokehfit.discs.verdict import UNSEEN_MARGIN_PX, _near
-
-    return float(_near(mask, outline, UNSEEN_MARGIN_PX).mean())
-
-
 @pytest.mark.parametrize("contrast", [0.05, 0.1, 0.2])
 def test_large_faint_discs_over_a_bright_background(contrast):
     height, width = 2000, 3000

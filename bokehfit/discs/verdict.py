@@ -37,8 +37,7 @@ What a kept disc offers (for the fit that comes later):
   clipped too are not reliable: bloom joins the disc to other clipped light.
 - **Its own outline**: the points beyond the frame, on a cutting circle or within
   ``UNSEEN_MARGIN_PX`` of bridged pixels (:mod:`bokehfit.discs.gaps`) are marked not
-  seen (``outline_reliable``); bridged pixels next to more than ``MAX_BRIDGED_SHARE`` of
-  the outline are no gaps in its edge but closings all along it (the constant's note).
+  seen (``outline_reliable``).
 - **Ring discs**: a disc is flagged ``ring`` when the
   median of its centre (within ``RING_CENTRE_REL`` of the radius) lies below the
   plateau by more than ``RING_DIP`` of the contrast.
@@ -83,14 +82,6 @@ MAX_CLIPPED_RING_SHARE = 0.3
 #: about 1, the slit of aspect 0.3 (the thinnest aperture) 0.27, a rectangle of sides 1:a
 #: 0.886/√a, so 0.2 refuses streaks longer than about 20 times their width.
 MIN_THICKNESS_REL = 0.2
-#: Bridged pixels (:mod:`bokehfit.discs.gaps`) are gaps in a disc's edge where they meet at most this share of its
-#: outline. A thin occluder meets the outline only where it crosses it: at two places, each about its width
-#: (at most 2 · OCCLUSION_BRIDGE_REL · r) and the margin either side, some 10 % of the outline and a few pixels;
-#: a ring's gaps are where its rim dims. Closings that meet more than half of the outline filled no gaps in an
-#: edge: they followed the edge itself, the notches that texture or noise cut all along a faint disc's 50 %
-#: region (reference photo 02: a plateau disc whose brighter side the ring measurement took for its rim). That
-#: outline is the disc's own edge, smoothed by the closing; it is seen, and no occluder is reported.
-MAX_BRIDGED_SHARE = 0.5
 #: Outline points within this distance (px) of bridged or cut-off pixels are not seen.
 UNSEEN_MARGIN_PX = 1.5
 #: A disc is a ring when its centre lies below the rim by this share of the contrast.
@@ -160,9 +151,7 @@ def describe(luminance, clipped_mask, found: Outlined, min_noise, min_diameter_p
     edge_width = contrast / max(_edge_gradient(crop, edge_points), 1e-12)
     outline_xy = outline + np.array([window.c0, window.r0], dtype=np.float64)
     off_frame = _off_frame(outline_xy, luminance.shape)
-    bridged = _near(found.bridged, outline, UNSEEN_MARGIN_PX)
-    gaps = bool(bridged.mean() <= MAX_BRIDGED_SHARE)  # else the closings followed the edge (MAX_BRIDGED_SHARE)
-    unseen = off_frame | found.on_cut | (bridged if gaps else False)
+    unseen = off_frame | found.on_cut | _near(found.bridged, outline, UNSEEN_MARGIN_PX)
     clipping = _Clipping.of(clipped_mask, window, inside, area, outline)
     if clipping.bloom is not None:
         unseen |= clipping.bloom
@@ -201,7 +190,7 @@ def describe(luminance, clipped_mask, found: Outlined, min_noise, min_diameter_p
         outline_reliable=~unseen,
         clipped_share=clipping.share,
         ring=_is_ring(crop, cx, cy, diameter, contrast),
-        occluded=found.bridged is not None and gaps,
+        occluded=found.bridged is not None,
         thickness=thickness,
     )
 
