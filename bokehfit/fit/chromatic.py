@@ -23,13 +23,7 @@ far more closely: a JPEG-60 copy of a photo without colour error gave blue
 +0.6 % ± 0.1 % from three discs of 29–84 px). It is
 reported only where at least ``MIN_DISCS`` discs measure it and one channel's
 median lies ``MIN_SIGNIFICANCE`` standard errors and ``MIN_CHROMATIC`` from 0:
-a lens whose colours agree to a fraction of a percent has no chromatic model;
-and where that still holds with any one disc left out. A lens's colour error
-is in every disc's light; a median that one disc carries is that disc's quirk (a
-JPEG-60 copy of reference photo 04 gave red −3.0 % ± 0.6 from four discs, one of
-them at +0.5 %: the spread of four is that of the three closest, and without one of
-those three the other three no longer agree; as the §3b features are kept, with
-any one disc left out, in :func:`bokehfit.fit.features.gain_without_one_disc`).
+a lens whose colours agree to a fraction of a percent has no chromatic model.
 
 The discs are measured in the frame they show (the seen side); the fit turns
 the sign with the rest of the aperture for a ``near`` focus side.
@@ -111,23 +105,13 @@ def measure_chromatic(rgb: Callable[[slice, slice], np.ndarray], discs: Sequence
         readable.append(math.sqrt(2.0) * 2.0 * CHANNEL_EDGE_PX / green)
     if len(ratios) < MIN_DISCS:
         return None
-    values, readable = np.asarray(ratios), np.asarray(readable)
-    median, error, significant = _median_and_error(values, readable)
-    # A lens's colour error is every disc's: it stays significant with any one disc left out (module Notes).
-    significant = significant and all(
-        len(values) > MIN_DISCS and _median_and_error(np.delete(values, i, axis=0), np.delete(readable, i))[2]
-        for i in range(len(values)))
-    return ChromaticMeasure(Chromatic(float(median[0]), float(median[1])), Chromatic(float(error[0]), float(error[1])),
-                            len(values), significant)
-
-
-def _median_and_error(values: np.ndarray, readable: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
-    """The discs' median (red, blue) ratios, the median's robust standard error, and whether one channel's
-    median meets the module's criteria (MIN_SIGNIFICANCE errors and MIN_CHROMATIC from 0)."""
+    values = np.asarray(ratios)
     median = np.median(values, axis=0)
     spread = 1.4826 * np.median(np.abs(values - median), axis=0)
     # Each disc's ratio errs by at least what its size lets a channel's edge tell (module Notes).
     spread = np.maximum(spread, math.sqrt(float(np.mean(np.square(readable)))))
     # the median's standard error: √(π/2) that of a mean
     error = spread * math.sqrt(math.pi / 2.0) / math.sqrt(len(values))
-    return median, error, bool(np.any((np.abs(median) >= MIN_SIGNIFICANCE * error) & (np.abs(median) >= MIN_CHROMATIC)))
+    significant = bool(np.any((np.abs(median) >= MIN_SIGNIFICANCE * error) & (np.abs(median) >= MIN_CHROMATIC)))
+    return ChromaticMeasure(Chromatic(float(median[0]), float(median[1])), Chromatic(float(error[0]), float(error[1])),
+                            len(values), significant)
