@@ -36,7 +36,6 @@ is the search not finding a place, or its tests not telling a disc from a bright
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 import os
 import sys
@@ -128,7 +127,7 @@ def finder_only(args) -> int:
     for entry, photo, found in labelled_photos(args.only):
         loaded = load_photo(photo)
         start = time.process_time()
-        search = find_discs(loaded.luminance, loaded.clipped, min_diameter_px=COMPARE_MIN_DIAMETER_PX)
+        search = find_discs(loaded.luminance, loaded.clipped, min_diameter_px=COMPARE_MIN_DIAMETER_PX, rgb=loaded.linear_rgb)
         cpu = time.process_time() - start
         seconds += cpu
         usable = places([d for d in search.discs if d.usable])

@@ -193,7 +193,7 @@ def _detect(photo: Photo, discs: str | os.PathLike | DiscLabels | None, min_diam
     """The photo's discs: found by the search, or (given a discs file) measured afresh at its usable discs' places."""
     if discs is None:
         return find_discs(photo.luminance, photo.clipped, min_diameter_px=min_diameter_px,
-                          max_diameter_px=max_diameter_px)
+                          max_diameter_px=max_diameter_px, rgb=photo.linear_rgb)
     labels = discs if isinstance(discs, DiscLabels) else read_labels(discs)
     _check_labels_photo(labels, photo)
     return measure_discs_at(photo.luminance, photo.clipped,

@@ -83,6 +83,7 @@ def run(args: argparse.Namespace) -> DiscSearch:
         max_diameter_px=args.max_diameter_px,
         max_discs=args.max_discs,
         progress=progress,
+        rgb=photo.linear_rgb,
     )
     print(f"{photo.path.name}: {photo.width}×{photo.height}, {photo.colour_space}; {photo.linearisation}")
     for note in (*photo.notes, *search.notes):

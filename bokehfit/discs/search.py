@@ -7,7 +7,8 @@
    :mod:`bokehfit.discs.scales`), a larger disc first claiming the candidates
    inside it (:class:`_OutlineGrid`): a cluster as a whole, split into its discs
    (:func:`_measure_cluster`); a blob by its contour and, where that calls it faint or soft-edged,
-   by its own step along rays (:func:`_measure_blob`).
+   by its own step along rays (:func:`_measure_blob`), and where its edge is still soft, in its colours
+   (:mod:`bokehfit.discs.colours`).
 3. The circles through the photo's edges that no candidate measured (:func:`_circle_discs`),
    measured as places (:mod:`bokehfit.discs.places`); one the contour calls faint or cannot outline,
    kept where its own step along rays shows a ring all round (:func:`_ring_by_rays`).
@@ -25,7 +26,8 @@ from __future__ import annotations
 import math
 import time
 from collections import Counter
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -33,6 +35,7 @@ from scipy.spatial import cKDTree
 
 from bokehfit.discs.candidates import LARGE_DISC_PX, MIN_NOISE, Candidate, find_candidates
 from bokehfit.discs.circles import SIZE_STEP, find_circles, find_sized_circles
+from bokehfit.discs.colours import sharp_in_a_colour
 from bokehfit.discs.disc import (
     SAME_DISC_CENTRE_REL,
     DiscSearch,
@@ -117,6 +120,7 @@ def find_discs(
     max_diameter_px: float = DEFAULT_MAX_DIAMETER_PX,
     max_discs: int | None = None,
     progress: bool = False,
+    rgb: Callable[[slice, slice], np.ndarray] | None = None,
 ) -> DiscSearch:
     """Find the bokeh discs of a linear-light image.
 
@@ -132,6 +136,10 @@ def find_discs(
         Keep the largest ``max_discs`` discs.
     progress : bool
         Show a progress bar while measuring many candidates.
+    rgb : callable, optional
+        ``rgb(rows, cols)``: a window of the same photo in linear RGB, (h, w, 3) (:meth:`bokehfit.io.Photo.linear_rgb`).
+        Where given, a blob whose luminance edge is soft is measured again in its colours: a lens's colour error
+        spreads a disc's edge in luminance (:mod:`bokehfit.discs.colours`).
 
     Returns
     -------
@@ -150,7 +158,7 @@ def find_discs(
     rejections: list[Rejection] = []
     candidates, found = _candidates(luminance, min_diameter_px, search_max_px, rejected, notes)
     measurements = _measure_candidates(luminance, clipped, candidates, min_diameter_px, max_diameter_px, progress,
-                                       rejected, rejections)
+                                       rejected, rejections, rgb)
     found += _circle_discs(luminance, clipped, measurements, min_diameter_px, min(max_diameter_px, search_max_px),
                            rejected, rejections)
     found += _sized_discs(luminance, clipped, measurements, min_diameter_px, min(max_diameter_px, search_max_px),
@@ -239,7 +247,7 @@ class _Measured:
 
 def _measure_candidates(luminance, clipped, candidates: list[Candidate], min_diameter_px: float,
                         max_diameter_px: float, progress: bool, rejected: Counter,
-                        rejections: list[Rejection]) -> list[Measurement]:
+                        rejections: list[Rejection], rgb: Callable | None = None) -> list[Measurement]:
     """The discs of the candidates, measured largest first: a candidate inside the outline of one
     measured before is its light, a cluster is measured as its discs (:func:`_measure_cluster`), a
     blob by its contour and its own step (:func:`_measure_blob`). Each that is no disc is counted in
@@ -258,7 +266,7 @@ def _measure_candidates(luminance, clipped, candidates: list[Candidate], min_dia
         elif candidate.cluster:
             measured = _measure_cluster(scales, candidate, min_diameter_px, max_diameter_px)
         else:
-            measured = _measure_blob(scales, candidate, min_diameter_px, max_diameter_px)
+            measured = _measure_blob(scales, candidate, min_diameter_px, max_diameter_px, rgb)
         if isinstance(measured, Rejection):
             rejected[measured.rejected_because] += 1
             rejections.append(measured)
@@ -318,17 +326,21 @@ def _measure_cluster(scales: PhotoScales, candidate: Candidate, min_diameter_px:
 
 
 def _measure_blob(scales: PhotoScales, candidate: Candidate, min_diameter_px: float,
-                  max_diameter_px: float) -> _Measured | Rejection:
+                  max_diameter_px: float, rgb: Callable | None = None) -> _Measured | Rejection:
     """A blob candidate measured by its contour (at the scale its size needs) and, from
     BLOB_RAYS_MIN_DIAMETER_PX where the contour calls it one of BLOB_RAYS_AFTER, by its own step along rays
-    (:func:`bokehfit.discs.places._by_rays_after`); a rejection, where it was measured, where it is no disc
-    of the sizes sought."""
+    (:func:`bokehfit.discs.places._by_rays_after`); where its edge is still soft, in its colours (``rgb``, where
+    given: :func:`bokehfit.discs.colours.sharp_in_a_colour`); a rejection, where it was measured, where it is
+    no disc of the sizes sought."""
     m = _measured_at_scale(scales, candidate, min_diameter_px)
     if isinstance(m, Measurement) and candidate.diameter_px >= BLOB_RAYS_MIN_DIAMETER_PX:
         m = _by_rays_after(scales.luminance, scales.clipped, m, candidate.center_xy, candidate.diameter_px,
                            min_diameter_px, BLOB_RAYS_AFTER)
     if isinstance(m, NoDisc):
         return Rejection.of(candidate.center_xy, candidate.diameter_px, m)
+    if m.reason is Reason.SOFT_EDGE and rgb is not None and not m.own_step and \
+            sharp_in_a_colour(rgb, scales.luminance.shape, m, min_diameter_px, scales.factor(candidate.diameter_px)):
+        m = replace(m, reason=None)  # a lens's colour error spread its edge in luminance (bokehfit.discs.colours)
     reason = m.reason if m.reason is not None else (Reason.TOO_LARGE if m.diameter_px > max_diameter_px else None)
     if reason is not None:
         return Rejection.of(m.center_xy, m.diameter_px, reason)
