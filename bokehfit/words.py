@@ -47,6 +47,10 @@ __all__ = [
 EVIDENCE_WORDS = ((2.0, "barely any"), (6.0, "positive"), (10.0, "strong"), (math.inf, "very strong"))
 #: The verdict's first sentence aims at most this many characters (what the aperture is, how sure, why).
 HEADLINE_CHARS = 120
+#: The first sentence names the angle only where its uncertainty is at most this share of the shape's symmetry:
+#: beyond it, the angle's ±2σ span covers the whole symmetry, every angle the shape can have (reference photo 15:
+#: a rounded triangle at 47.89° ± 100° from two discs).
+ANGLE_FIXED_SHARE = 0.25
 
 
 def fstop_text(aperture: dict) -> str:
@@ -120,11 +124,15 @@ def clip_headline(sentence: str) -> str:
 
 
 def shape_words(aperture: dict) -> str:
-    """The aperture's shape and angle for the verdict's first sentence (its features come after, with numbers)."""
+    """The aperture's shape and angle for the verdict's first sentence (its features come after, with numbers); the
+    angle only where the discs fix it (ANGLE_FIXED_SHARE of the symmetry)."""
     name = Aperture.from_json(aperture).display_name
-    if aperture["angle_deg"] is not None:
-        name += f" at {aperture['angle_deg']:.2f}°"
-    return name
+    angle, sigma, symmetry = aperture["angle_deg"], aperture.get("angle_uncertainty_deg"), aperture.get("symmetry_deg")
+    if angle is None:
+        return name
+    if sigma is not None and symmetry and sigma > ANGLE_FIXED_SHARE * symmetry:
+        return name + " (its angle not fixed by the discs)"
+    return name + f" at {angle:.2f}°"
 
 
 def article(words: str) -> str:

@@ -201,3 +201,17 @@ def test_the_row_marked_best_is_the_best(circle):
     assert all(float(row[2]) == lowest for row in best), cells
     assert cells[0][3].startswith("chosen"), cells[0]
     assert abs(min(c.delta_bic for c in shifted) - lowest) <= 0.5  # the table rounds to whole ΔBIC
+
+
+@pytest.mark.parametrize("sigma, named", [(2.0, True), (29.0, True), (31.0, False), (100.0, False), (None, True)])
+def test_the_headline_names_an_angle_only_where_the_discs_fix_it(sigma, named):
+    """A rounded triangle at 47.89° ± 100° (reference photo 15, two discs): every angle of its 120° symmetry lies
+    within that; the first sentence says so instead of naming one."""
+    from bokehfit.words import ANGLE_FIXED_SHARE, shape_words
+
+    aperture = {"shape": "triangle", "blades": 3, "roundness": 0.88, "angle_deg": 47.887, "angle_uncertainty_deg": sigma,
+                "symmetry_deg": 120.0}
+    words = shape_words(aperture)
+    assert words.startswith("rounded triangle")
+    assert ("at 47.89°" in words) == named and ("not fixed" in words) == (not named), words
+    assert (sigma is None or sigma <= ANGLE_FIXED_SHARE * 120.0) == named
