@@ -465,3 +465,63 @@ def test_the_background_planes_least_squares_agree_with_numpys_and_survive_pixel
     flat = np.column_stack([np.ones(50), np.full(50, 7.0), np.arange(50.0)])
     solved = _least_squares_3(flat, 0.5 + 0.01 * np.arange(50.0))
     assert np.allclose(flat @ solved, 0.5 + 0.01 * np.arange(50.0))
+
+
+def test_the_bright_centre_search_settles_as_all_its_levels_do():
+    """The step search traces its low levels, then those above from the top until one settles it: the answer
+    of tracing all ten (BRIGHT_CENTRE_LEVELS) and comparing them, on glows, cones, blurred flat discs and
+    bright-centre discs of many rims, with noise."""
+    from bokehfit.discs.contours import _crop_gradients, _edge_gradient, _outline, polygon_area_centroid
+    from bokehfit.discs.measure import (
+        BRIGHT_CENTRE_LEVELS,
+        BRIGHT_CENTRE_MAX_LEVEL,
+        BRIGHT_CENTRE_SHOULDER,
+        BRIGHT_CENTRE_STEEPER,
+        _step_share,
+    )
+    from bokehfit.discs.outlines import _two_passes
+    from bokehfit.discs.reasons import NoDisc
+
+    def every_level(found):
+        crop, levels = found.crop, found.levels
+        contrast = levels.plateau - levels.background
+        _, cx, cy = polygon_area_centroid(found.outline)
+        gradients = _crop_gradients(crop)
+        steep = []
+        for share in BRIGHT_CENTRE_LEVELS:
+            contour = _outline(crop, levels.background + share * contrast, levels.background, (cy, cx))
+            steep.append(0.0 if contour is None else _edge_gradient(crop, contour, gradients))
+        best = int(np.argmax(steep))
+        share, steepest = BRIGHT_CENTRE_LEVELS[best], steep[best]
+        if share > BRIGHT_CENTRE_MAX_LEVEL:
+            return None
+        shoulder = 2.0 * share + BRIGHT_CENTRE_SHOULDER - 1e-9
+        above = max(s for level, s in zip(BRIGHT_CENTRE_LEVELS, steep) if level >= shoulder)
+        return share if steepest >= BRIGHT_CENTRE_STEEPER * above else None
+
+    rng = np.random.default_rng(21)
+    size = 121
+    rows, cols = np.mgrid[0:size, 0:size].astype(np.float32)
+    answers = []
+    for trial in range(60):
+        radius = float(rng.uniform(14.0, 40.0))
+        distance = np.hypot(cols - 60.0 - rng.uniform(-0.5, 0.5), rows - 60.0 - rng.uniform(-0.5, 0.5))
+        kind = trial % 4
+        if kind == 0:  # a glow
+            light = np.exp(-0.5 * (distance / (0.6 * radius)) ** 2)
+        elif kind == 1:  # a cone
+            light = np.clip(1.0 - distance / (1.4 * radius), 0.0, None)
+        else:  # a flat disc blurred up to 0.4 of its radius; a disc falling from its centre to a step at its edge
+            rim = float(rng.uniform(-0.95, -0.5)) if kind == 3 else 0.0
+            light = (distance <= radius) * (1.0 + rim * (distance / radius) ** 2)
+            blur = rng.uniform(0.8, 0.1 * radius) if kind == 3 else rng.uniform(1.0, 0.4 * radius)
+            light = cv2.GaussianBlur(light.astype(np.float32), (0, 0), float(blur))
+        image = (0.05 + 0.6 * light + rng.normal(0.0, 0.004, light.shape)).astype(np.float32)
+        found = _two_passes(image, (60.0, 60.0), radius, radius, 0.8)
+        if isinstance(found, NoDisc):
+            continue
+        expected = every_level(found)
+        assert _step_share(found) == expected, trial
+        answers.append(expected)
+    assert len(answers) >= 50 and sum(a is None for a in answers) >= 10 and sum(a is not None for a in answers) >= 5, \
+        (len(answers), sum(a is None for a in answers))

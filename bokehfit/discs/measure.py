@@ -150,21 +150,34 @@ def _step_share(found: Outlined) -> float | None:
     :data:`BRIGHT_CENTRE_LEVELS` around its centre are compared by their median
     gradient (module constants). None where no level is markedly steeper low down:
     no step, so no disc's edge.
+
+    The levels up to BRIGHT_CENTRE_MAX_LEVEL are traced first (the step, if any, is the steepest of them); then
+    those above, from the top, until one settles it: steeper than the step (the steepest level lies above
+    BRIGHT_CENTRE_MAX_LEVEL), or above the step's shoulder and not BRIGHT_CENTRE_STEEPER times less steep. A glow,
+    steepest at 0.61 of its peak, is settled by the first. The answer is the one all ten levels give.
     """
     crop, outline = found.crop, found.outline
     background, plateau = found.levels.background, found.levels.plateau
     contrast = plateau - background
     _, cx, cy = polygon_area_centroid(outline)
-    steepness, gradients = [], _crop_gradients(crop)  # one crop, ten levels
-    for share in BRIGHT_CENTRE_LEVELS:
+    gradients = _crop_gradients(crop)  # one crop, ten levels
+
+    def steepness(share: float) -> float:
         contour = _outline(crop, background + share * contrast, background, (cy, cx))
-        steepness.append(0.0 if contour is None else _edge_gradient(crop, contour, gradients))
-    best = int(np.argmax(steepness))
-    share, steepest = BRIGHT_CENTRE_LEVELS[best], steepness[best]
-    if share > BRIGHT_CENTRE_MAX_LEVEL:
+        return 0.0 if contour is None else _edge_gradient(crop, contour, gradients)
+
+    low = [level for level in BRIGHT_CENTRE_LEVELS if level <= BRIGHT_CENTRE_MAX_LEVEL]  # the first ones: ascending
+    steep = [steepness(level) for level in low]
+    best = int(np.argmax(steep))  # the first of the steepest, as over all ten: those above come after
+    share, steepest = low[best], steep[best]
+    shoulder = 2.0 * share + BRIGHT_CENTRE_SHOULDER - 1e-9
+    if any(level >= shoulder and BRIGHT_CENTRE_STEEPER * s > steepest for level, s in zip(low, steep)):
         return None
-    above = max(s for level, s in zip(BRIGHT_CENTRE_LEVELS, steepness) if level >= 2.0 * share + BRIGHT_CENTRE_SHOULDER - 1e-9)
-    return share if steepest >= BRIGHT_CENTRE_STEEPER * above else None
+    for level in reversed(BRIGHT_CENTRE_LEVELS[len(low):]):
+        s = steepness(level)
+        if s > steepest or (level >= shoulder and BRIGHT_CENTRE_STEEPER * s > steepest):
+            return None
+    return share
 
 
 def outline_diameter(image: np.ndarray, center_xy: tuple[float, float], diameter_px: float) -> float | None:
