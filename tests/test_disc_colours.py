@@ -72,3 +72,14 @@ def test_a_blob_whose_colours_do_not_account_for_its_soft_edge_stays_out(what):
         rgb = colour_photo((14.0, 14.0, 14.0), (0.3, 1.0, 1.0), blur=(1.0, 6.0, 6.0))
     for colours in (False, True):
         assert not [d for d in near_centre(search(rgb.astype(np.float32), colours)) if d.usable], (what, colours)
+
+
+def test_an_rgb_that_is_not_the_photo_s_is_a_clear_error():
+    from bokehfit.errors import InputError
+
+    rgb = colour_photo((10.0, 14.0, 19.0), (1.0, 0.5, 1.0), blur=2.2)
+    luminance = np.ascontiguousarray(rgb @ WEIGHTS)
+    with pytest.raises(InputError, match="rgb must be a function"):
+        find_discs(luminance, rgb=rgb)
+    with pytest.raises(InputError, match="window's linear RGB"):
+        find_discs(luminance, rgb=lambda rows, cols: rgb[rows, cols, :2])  # two channels

@@ -41,6 +41,7 @@ from bokehfit.discs.measure import Measurement, describe
 from bokehfit.discs.outlines import _two_passes
 from bokehfit.discs.places import _near_place
 from bokehfit.discs.reasons import NoDisc
+from bokehfit.errors import InputError
 
 __all__ = ["sharp_in_a_colour", "COLOUR_WINDOW_REL", "MIN_COLOUR_GAP_REL", "MIN_DIAMETER_PX"]
 
@@ -70,6 +71,9 @@ def sharp_in_a_colour(rgb: Callable[[slice, slice], np.ndarray], shape: tuple[in
     if min(rows, cols) < 3:
         return False
     pixels = np.asarray(rgb(slice(r0, r0 + rows * factor), slice(c0, c0 + cols * factor)), dtype=np.float32)
+    if pixels.shape != (rows * factor, cols * factor, 3):
+        raise InputError(f"rgb(rows, cols) must give the window's linear RGB, {(rows * factor, cols * factor, 3)} here "
+                         f"(got {pixels.shape})")
     if factor > 1:
         pixels = cv2.resize(pixels, (cols, rows), interpolation=cv2.INTER_AREA)
     shift = 0.5 * (factor - 1)

@@ -62,6 +62,7 @@ from bokehfit.discs.rays import measure_rays
 from bokehfit.discs.reasons import NoDisc, Reason
 from bokehfit.discs.scales import PhotoScales
 from bokehfit.discs.verdict import ring_all_round
+from bokehfit.errors import InputError
 
 #: Smallest disc the detector seeks by default (``bokehfit discs``): glints from 4 px are counted.
 DEFAULT_MIN_DIAMETER_PX = 4.0
@@ -151,6 +152,8 @@ def find_discs(
     clipped, min_diameter_px, max_diameter_px, max_discs = _check_parameters(
         luminance.shape, clipped, min_diameter_px, max_diameter_px, max_discs
     )
+    if rgb is not None and not callable(rgb):
+        raise InputError(f"rgb must be a function of (rows, cols) giving the photo's linear RGB (got {type(rgb).__name__})")
     # No disc is larger than the frame's diagonal: that is also what max_diameter_px=inf means.
     search_max_px = min(max_diameter_px, max(math.hypot(*luminance.shape), 2.0 * min_diameter_px))
     rejected: Counter = Counter()
