@@ -8,8 +8,8 @@ luminance, steps down once for each over the gap between their radii (reference 
 discs of 20, 28 and 38 px, their edges 0.2–0.5 of their radii wide, make a luminance edge as wide as its radius).
 The luminance's soft-edge test (:mod:`bokehfit.discs.verdict`) takes such a disc for a glow. A glow is soft in
 every colour, and its colours' outlines lie together. So a disc whose luminance edge is soft is measured again in
-each colour channel of the photo, as a candidate is (:func:`bokehfit.discs.measure.measure_candidate`), at the
-scale it was measured at (:mod:`bokehfit.discs.scales`), and kept where
+each colour channel of the photo by its contour (below), at the scale it was measured at
+(:mod:`bokehfit.discs.scales`), and kept where
 
 - one channel shows a disc there that passes every test of one (at its place and of about its size,
   :func:`bokehfit.discs.places._near_place`), and
@@ -21,10 +21,10 @@ Its luminance measurement is kept: the 50 % outline of concentric images of one 
 shape, and the fit reads the luminance. A channel is measured by its contour alone (its levels and 50 %
 outline, :func:`bokehfit.discs.outlines._two_passes`, and the tests of a disc): the question is whether its
 edge is sharp there, not what a ring or a bright centre would make of it. Discs under ``MIN_DIAMETER_PX`` are
-not measured again: a gap of ``MIN_COLOUR_GAP_REL`` of their radius is a pixel or less, about what the
-channels' outlines are read to (:data:`bokehfit.fit.chromatic.CHANNEL_EDGE_PX`) on their few edge pixels, and the
-soft-edged blobs of that size on the reference photos were glints and texture (the 225 of them measured in their
-colours cost 1 s of the 17 photos' search and added no labelled disc).
+not measured again: the gap sought is then under 1.6 px, as wide as the blur that a JPEG's colour, stored at half
+resolution (4:2:0), gives the channels' edges, and the soft-edged blobs of that size on the reference photos were
+glints and texture (the 225 of them measured in their colours cost 1 s of the 17 photos' search and added no
+labelled disc).
 """
 
 from __future__ import annotations
