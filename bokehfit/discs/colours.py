@@ -32,7 +32,6 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 
-import cv2
 import numpy as np
 
 from bokehfit.discs.candidates import MIN_NOISE
@@ -41,6 +40,7 @@ from bokehfit.discs.measure import Measurement, describe
 from bokehfit.discs.outlines import _two_passes
 from bokehfit.discs.places import _near_place
 from bokehfit.discs.reasons import NoDisc
+from bokehfit.discs.scales import PhotoScales, averaged
 from bokehfit.errors import InputError
 
 __all__ = ["sharp_in_a_colour", "COLOUR_WINDOW_REL", "MIN_COLOUR_GAP_REL", "MIN_DIAMETER_PX"]
@@ -75,9 +75,8 @@ def sharp_in_a_colour(rgb: Callable[[slice, slice], np.ndarray], shape: tuple[in
         raise InputError(f"rgb(rows, cols) must give the window's linear RGB, {(rows * factor, cols * factor, 3)} here "
                          f"(got {pixels.shape})")
     if factor > 1:
-        pixels = cv2.resize(pixels, (cols, rows), interpolation=cv2.INTER_AREA)
-    shift = 0.5 * (factor - 1)
-    centre = ((m.center_xy[0] - c0 - shift) / factor, (m.center_xy[1] - r0 - shift) / factor)
+        pixels = averaged(pixels, factor)
+    centre = PhotoScales.to_copy((m.center_xy[0] - c0, m.center_xy[1] - r0), factor)
     diameter = m.diameter_px / factor
     sizes, sharp = [], False
     for channel in range(3):

@@ -30,7 +30,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-__all__ = ["PhotoScales", "MEASURE_SIDE_PX"]
+__all__ = ["PhotoScales", "MEASURE_SIDE_PX", "averaged"]
 
 #: A candidate is measured on the photo area-averaged by ⌊D / MEASURE_SIDE_PX⌋ where that is 2 or more.
 MEASURE_SIDE_PX = 128.0
@@ -59,9 +59,7 @@ class PhotoScales:
         if self._copy is None or self._copy[0] != factor:
             self._copy = None  # the last copy goes before the next is made
             height, width = (side // factor for side in self.luminance.shape)
-            # A view (OpenCV reads its rows where they lie): no temporary the size of the photo.
-            whole = self.luminance[: height * factor, : width * factor].astype(np.float32, copy=False)
-            copy = cv2.resize(whole, (width, height), interpolation=cv2.INTER_AREA)
+            copy = averaged(self.luminance, factor)
             clipped = None
             if self.clipped is not None:
                 blocks = self.clipped[: height * factor, : width * factor].reshape(height, factor, width, factor)
@@ -74,3 +72,12 @@ class PhotoScales:
         """A point of the photo in the pixels of the copy averaged by ``factor``."""
         shift = 0.5 * (factor - 1)
         return ((xy[0] - shift) / factor, (xy[1] - shift) / factor)
+
+
+def averaged(image: np.ndarray, factor: int) -> np.ndarray:
+    """``image`` (rows and columns first; channels after, if any) area-averaged ``factor`` × ``factor``: its pixel
+    (r, c) the mean of the image's block from (factor · r, factor · c), the rows and columns past the last whole block
+    left out. A view is read (OpenCV reads its rows where they lie): no temporary the size of the image."""
+    height, width = (side // factor for side in image.shape[:2])
+    whole = image[: height * factor, : width * factor].astype(np.float32, copy=False)
+    return cv2.resize(whole, (width, height), interpolation=cv2.INTER_AREA)
