@@ -24,8 +24,8 @@ from bokehfit.kernels import Kernel
 from bokehfit.optics import FStop, Geometry
 from bokehfit.uncertainty import measurable, unmeasurable_reason
 from bokehfit.words import (angle_note, article, clip_headline, describe, diameter_text, disc_problems, distance_text,
-                            evidence_words, fstop_text, geometry_lines, kernel_words, shape_words, table_candidates,
-                            used_as)
+                            evidence_words, fstop_text, geometry_lines, kernel_words, rejection_lines, shape_words,
+                            table_candidates, used_as)
 
 __all__ = ["SCHEMA_VERSION", "Comparison"]
 
@@ -237,7 +237,8 @@ class Comparison:
             "input": self.photo.input_json(),
             "geometry": self.geometry.to_json(),
             "detection": {"candidates": self.search.candidates, "rejected": dict(self.search.rejected),
-                          "resolvable_px": RESOLVABLE_PX},
+                          "resolvable_px": RESOLVABLE_PX, "places_given": self.search.given,
+                          "rejections": [r.to_json() for r in self.search.rejections]},
             "aperture": self.aperture_json(),
             "kernel": self.kernel_json(),
             "discs": [self.disc_json(disc) for disc in self.search.discs],
@@ -254,6 +255,7 @@ class Comparison:
         lines = [self.verdict] + ([self.verdict_details] if self.verdict_details else []) + [
                  f"{self.photo.path.name}: {photo['width']}×{photo['height']}, {len(discs)} discs "
                  f"({usable} usable, {used} used in the fit, {len(discs) - usable} rejected)"]
+        lines.extend(rejection_lines(data["detection"]))
         lines.extend(f"note: {note}" for note in photo["notes"])
         lines.extend(geometry_lines(data))
         aperture = data["aperture"]

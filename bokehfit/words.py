@@ -37,6 +37,8 @@ __all__ = [
     "fstop_text",
     "geometry_lines",
     "kernel_words",
+    "rejection_counts",
+    "rejection_lines",
     "shape_words",
     "table_candidates",
     "used_as",
@@ -51,6 +53,9 @@ HEADLINE_CHARS = 120
 #: beyond it, the angle's ±2σ span covers the whole symmetry, every angle the shape can have (reference photo 15:
 #: a rounded triangle at 47.89° ± 100° from two discs).
 ANGLE_FIXED_SHARE = 0.25
+#: A search's places that are no disc are counted by reason in the summary, this many reasons named (each place with
+#: its reason is in the JSON); a person's places (``compare --discs``) that are no disc are named one by one.
+REJECTION_REASONS_NAMED = 4
 
 
 def fstop_text(aperture: dict) -> str:
@@ -230,3 +235,29 @@ def kernel_words(data: dict) -> str:
     words = kernel["method"] if kernel["samples"] is None else f"{kernel['method']}, {kernel['samples']} samples"
     adapter = device.get("adapter")
     return f"{words} on {adapter}" if adapter else f"{words} on the CPU"
+
+
+def rejection_counts(detection: dict) -> list[tuple[str, int]]:
+    """A search's places that are no disc (a ``detection`` of ``compare --json``), counted by reason (the words before
+    a reason's numbers), the most first."""
+    counts: dict[str, int] = {}
+    for reason, n in detection["rejected"].items():
+        head = reason.split(" (")[0]
+        counts[head] = counts.get(head, 0) + n
+    return sorted(counts.items(), key=lambda item: (-item[1], item[0]))
+
+
+def rejection_lines(detection: dict) -> list[str]:
+    """The places measured that are no disc, for the summary: a ``detection`` of ``compare --json``. Each place a
+    person gave (``places_given``) on a line of its own; a search's counted by reason (:func:`rejection_counts`),
+    REJECTION_REASONS_NAMED reasons named, the rest counted together."""
+    if detection.get("places_given"):
+        return [f"not a disc at ({r['center_xy'][0]:.0f}, {r['center_xy'][1]:.0f}), {r['diameter_px']:.0f} px given: "
+                f"{r['rejected_because']}" for r in detection["rejections"]]
+    counts = rejection_counts(detection)
+    if not counts:
+        return []
+    named = counts[:REJECTION_REASONS_NAMED]
+    rest = sum(n for _, n in counts[REJECTION_REASONS_NAMED:])
+    words = ", ".join(f"{n} {why}" for why, n in named) + (f", {rest} for other reasons" if rest else "")
+    return [f"not discs: {words} (each place with its reason: the JSON's detection.rejections)"]

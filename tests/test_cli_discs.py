@@ -56,6 +56,14 @@ def test_table_json_and_overlay(photo, tmp_path):
         assert np.hypot(*np.subtract(nearest["center_xy"], truth.center_xy)) < 1.0
         assert abs(nearest["diameter_px"] - truth.diameter_px) < 0.06 * truth.diameter_px
         assert nearest["saturated"] == (truth.brightness > 1)
+    # Every candidate measured and rejected is listed with its place and reason; the counts are theirs (and those
+    # of candidates past the limits, counted only).
+    detection = data["detection"]
+    listed = {}
+    for rejection in detection["rejections"]:
+        assert len(rejection["center_xy"]) == 2 and rejection["diameter_px"] > 0
+        listed[rejection["rejected_because"]] = listed.get(rejection["rejected_because"], 0) + 1
+    assert listed and listed == {k: n for k, n in detection["rejected"].items() if "beyond the" not in k}
     overlay = cv2.imread(str(tmp_path / "d.png"))
     assert overlay.shape == (260, 400, 3)
     assert (np.abs(overlay.astype(int) - overlay[..., ::-1].astype(int)).sum(axis=2) > 60).sum() > 200  # coloured outlines

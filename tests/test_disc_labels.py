@@ -185,13 +185,21 @@ def test_compare_discs_fits_exactly_the_given_discs(tmp_path, gpu):
     labels["discs"][4]["usable"] = False  # left out
     labels["discs"].append({"center_xy": [40, 220], "diameter_px": 20})  # nothing there: said why
     (tmp_path / "d.json").write_text(json.dumps(labels), encoding="utf-8")
-    done = _compare(photo, "--discs", "d.json", "--json", "out.json", "--no-html", cwd=tmp_path)
+    done = _compare(photo, "--discs", "d.json", "--json", "out.json", cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     result = json.loads((tmp_path / "out.json").read_text(encoding="utf-8"))
     used = [d for d in result["discs"] if d["used"]]
     assert len(used) == 4, [d["center_xy"] for d in result["discs"]]
     assert all(min(np.hypot(*np.subtract(d["center_xy"], g.center_xy)) for g in DISCS[:4]) < 0.5 for d in used)
     assert result["aperture"]["shape"] == "hexagon"
+    # The place with nothing there is accounted for, with its reason: in the JSON, the summary and the report.
+    detection = result["detection"]
+    assert detection["places_given"] is True
+    assert [(r["center_xy"], r["diameter_px"]) for r in detection["rejections"]] == [([40, 220], 20)]
+    why = detection["rejections"][0]["rejected_because"]
+    assert why and f"not a disc at (40, 220), 20 px given: {why}" in done.stdout
+    report = (tmp_path / "out.html").read_text(encoding="utf-8")
+    assert "Places given that are no disc" in report and "<td>(40, 220)</td>" in report
 
 
 def test_compare_discs_refuses_a_file_for_another_photo(tmp_path):

@@ -215,3 +215,23 @@ def test_the_headline_names_an_angle_only_where_the_discs_fix_it(sigma, named):
     assert words.startswith("rounded triangle")
     assert ("at 47.89°" in words) == named and ("not fixed" in words) == (not named), words
     assert (sigma is None or sigma <= ANGLE_FIXED_SHARE * 120.0) == named
+
+
+def test_places_that_are_no_disc_are_said():
+    """A person's places that are no disc are named one by one; a search's are counted by reason (the words before a
+    reason's numbers counted together), the fifth reason on counted as the rest; none, nothing said."""
+    from bokehfit.words import REJECTION_REASONS_NAMED, rejection_counts, rejection_lines
+
+    given = {"places_given": True, "rejected": {"faint": 1},
+             "rejections": [{"center_xy": [2750.4, 775.0], "diameter_px": 310.2, "rejected_because": "faint"}]}
+    assert rejection_lines(given) == ["not a disc at (2750, 775), 310 px given: faint"]
+    rejected = {"faint": 9, "soft edge": 4, "the disc measured there (40 px at 3, 4)": 2,
+                "the disc measured there (12 px at 5, 6)": 3, "no outline": 1, "not compact": 1, "elongated": 1}
+    search = {"places_given": False, "rejected": rejected, "rejections": []}
+    counts = rejection_counts(search)
+    assert counts[:3] == [("faint", 9), ("the disc measured there", 5), ("soft edge", 4)]
+    assert sum(n for _, n in counts) == sum(rejected.values())
+    (line,) = rejection_lines(search)
+    assert REJECTION_REASONS_NAMED == 4
+    assert line.startswith("not discs: 9 faint, 5 the disc measured there, 4 soft edge, 1 elongated, 2 for other reasons")
+    assert rejection_lines({"places_given": False, "rejected": {}, "rejections": []}) == []

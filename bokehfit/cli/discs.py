@@ -101,6 +101,7 @@ def run(args: argparse.Namespace) -> DiscSearch:
                     "rejected": dict(search.rejected),
                     "min_diameter_px": args.min_diameter_px,
                     "max_diameter_px": args.max_diameter_px,
+                    "rejections": [r.to_json() for r in search.rejections],
                 },
                 "discs": [disc.to_json() for disc in search.discs],
                 "timing_s": {"load": round(loaded - start, 4), "detect": round(search.time_s, 4)},

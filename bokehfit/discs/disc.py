@@ -162,6 +162,9 @@ class DiscSearch:
     #: Every measured candidate that was not kept, with its reason (those beyond the
     #: candidate limit are only counted).
     rejections: tuple[Rejection, ...] = ()
+    #: The places were given (a person's discs, :func:`bokehfit.discs.measure_discs_at`), not searched for:
+    #: each that is no disc is one the person asked about.
+    given: bool = False
 
     def __bool__(self) -> bool:
         return bool(self.discs)
@@ -174,6 +177,9 @@ class DiscSearch:
         """Why nothing was found (empty when discs were found)."""
         if self.discs:
             return ""
+        if self.given:
+            why = ", ".join(f"{n} {reason}" for reason, n in self.rejected.most_common())
+            return f"no disc at the {self.candidates} places given ({why})" if self.candidates else "no places given"
         if not self.candidates:
             return "no highlight stands out from the background"
         why = ", ".join(f"{n} {reason}" for reason, n in self.rejected.most_common())
@@ -241,8 +247,9 @@ def _check_parameters(shape, clipped, min_diameter_px, max_diameter_px, max_disc
     return clipped, min_diameter_px, max_diameter_px, max_discs
 
 
-def _discs_of(measurements, found, rejected, start, notes, rejections, max_discs) -> DiscSearch:
-    """The search's discs from its measurements: one per disc, largest first, each with what it offers."""
+def _discs_of(measurements, found, rejected, start, notes, rejections, max_discs, given: bool = False) -> DiscSearch:
+    """The search's discs from its measurements: one per disc, largest first, each with what it offers (``given``:
+    the places were a person's, :attr:`DiscSearch.given`)."""
     measurements = _distinct_measurements(measurements)
     measurements.sort(key=lambda m: -m.diameter_px)
     if max_discs is not None:
@@ -281,7 +288,7 @@ def _discs_of(measurements, found, rejected, start, notes, rejections, max_discs
                 clipped_share=m.clipped_share,
             )
         )
-    return DiscSearch(discs, found, +rejected, time.perf_counter() - start, tuple(notes), tuple(rejections))
+    return DiscSearch(discs, found, +rejected, time.perf_counter() - start, tuple(notes), tuple(rejections), given)
 
 
 def _flag_neighbours(measurements: list[Measurement]) -> list[bool]:

@@ -80,7 +80,7 @@ def measure_discs_at(
         else:
             measurements.append(replace(m, reason=None))
     measurements = [replace(m, reason=None) for m in _by_own_steps(luminance, clipped, measurements, 1.0)]
-    return _discs_of(measurements, len(places), rejected, start, [], rejections, None)
+    return _discs_of(measurements, len(places), rejected, start, [], rejections, None, given=True)
 
 
 def _measure_place(luminance, clipped, xy, diameter: float, min_diameter_px: float = 1.0,

@@ -20,7 +20,8 @@ import numpy as np
 
 from bokehfit.comparison import Comparison
 from bokehfit.uncertainty import plus_minus
-from bokehfit.words import diameter_text, distance_text, evidence_words, fstop_text, kernel_words, table_candidates
+from bokehfit.words import (diameter_text, distance_text, evidence_words, fstop_text, kernel_words, rejection_counts,
+                            table_candidates)
 from bokehfit.fit.disc_model import model_window
 from bokehfit.metrics import METRICS
 from bokehfit.report.overlay import ROLE_BGR, disc_role, draw_disc_overlay
@@ -269,6 +270,22 @@ def _candidate_rows(candidates: list[dict]) -> list[list[str]]:
     return rows
 
 
+def _not_discs(detection: dict) -> str:
+    """The places measured that are no disc: each a person gave, with its reason; a search's counted by reason (the
+    words before its numbers)."""
+    if detection["places_given"]:
+        if not detection["rejections"]:
+            return ""
+        rows = [[f"({r['center_xy'][0]:.0f}, {r['center_xy'][1]:.0f})", f"{r['diameter_px']:.0f}", r["rejected_because"]]
+                for r in detection["rejections"]]
+        return "<h2>Places given that are no disc</h2>" + _table(["centre (x, y)", "diameter px", "why"], rows)
+    rows = [[why, str(n)] for why, n in rejection_counts(detection)]
+    if not rows:
+        return ""
+    return ("<h2>Candidates that are no disc</h2><p>Each place with its reason and numbers is in the JSON's "
+            "<code>detection.rejections</code>.</p>" + _table(["why", "how many"], rows))
+
+
 def build_html(comparison: Comparison, command_line: str) -> str:
     """The whole report as one HTML string, rendered from ``comparison.to_json`` on every outcome."""
     photo, fit = comparison.photo, comparison.fit
@@ -278,7 +295,11 @@ def build_html(comparison: Comparison, command_line: str) -> str:
     focus = data["geometry"]["focus_distance_m"]
     depths = {index: distance_text(entry["depth_m"], focus).replace("≈ ∞", "~inf")  # the overlay's font is ASCII
               for index, entry in entries.items() if entry.get("depth_m") is not None}
-    overlay = draw_disc_overlay(photo.display, comparison.search.discs, used=used, max_side=MAX_OVERVIEW_PX, labels=depths)
+    detection = data["detection"]
+    given_no_disc = [(tuple(r["center_xy"]), r["diameter_px"]) for r in detection["rejections"]] \
+        if detection["places_given"] else []
+    overlay = draw_disc_overlay(photo.display, comparison.search.discs, used=used, max_side=MAX_OVERVIEW_PX, labels=depths,
+                                not_discs=given_no_disc)
     status = data["status"]
     parts = [
         "<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>",
@@ -303,8 +324,13 @@ def build_html(comparison: Comparison, command_line: str) -> str:
             ("rejected", ROLE_BGR["rejected"], "rejected: saturated, cut by the frame, overlapping or too small"),
         )
     )
+    if given_no_disc:
+        b = ROLE_BGR["rejected"]
+        legend += (f'<span class="swatch" style="background: rgb({b[2]}, {b[1]}, {b[0]})"></span>'
+                   f"circle with a cross: a place given that is no disc ({len(given_no_disc)})")
     parts.append(f"<h2>Photo and discs</h2><p>{len(entries)} discs found.</p><p class='legend'>{legend}</p>")
     parts.append(f'<img class="overview" src="{_data_uri(overlay, ".jpg")}" alt="photo with disc outlines">')
+    parts.append(_not_discs(detection))
     if fit:
         parts.append("<h2>Fitted discs: photo, model, residual</h2>" + _residual_bar(RESIDUAL_SPAN)
                      + _disc_tiles(comparison, entries))

@@ -40,6 +40,7 @@ def draw_disc_overlay(
     used: set[int] | None = None,
     max_side: int | None = None,
     labels: dict[int, str] | None = None,
+    not_discs: list[tuple[tuple[float, float], float]] | None = None,
 ) -> np.ndarray:
     """BGR image (for cv2.imencode) of the photo with every disc's outline and index.
 
@@ -56,6 +57,9 @@ def draw_disc_overlay(
         sized for the picture as shown, not for the full-size photo.
     labels : dict of int to str, optional
         Text after a disc's index (``compare``: the light's distance, ``"3: 1.92 m"``).
+    not_discs : list of ((x, y), diameter_px), optional
+        Places asked about that are no disc (``compare --discs``): each a circle of its size with a cross at its
+        centre, in the rejected colour.
     """
     canvas = cv2.cvtColor(np.ascontiguousarray(display_rgb), cv2.COLOR_RGB2BGR)
     scale = 1.0
@@ -70,6 +74,14 @@ def draw_disc_overlay(
     font_scale = max(0.35, LABEL_HEIGHT_REL * max(height, width) / 22.0)
     labels = labels or {}
     placed: list[tuple[int, int, int, int]] = []  # the labels drawn so far, (x0, y0, x1, y1)
+    for (x, y), diameter in not_discs or ():
+        centre = tuple(int(round((v + 0.5) * scale * (1 << _SHIFT))) for v in (x, y))
+        radius = int(round(0.5 * diameter * scale * (1 << _SHIFT)))
+        arm = max(radius // 4, 3 << _SHIFT)
+        cv2.circle(canvas, centre, radius, FLAGGED_BGR, thickness, cv2.LINE_AA, shift=_SHIFT)
+        for dx, dy in ((arm, arm), (arm, -arm)):
+            cv2.line(canvas, (centre[0] - dx, centre[1] - dy), (centre[0] + dx, centre[1] + dy), FLAGGED_BGR, thickness,
+                     cv2.LINE_AA, shift=_SHIFT)
     for disc in discs:
         colour = ROLE_BGR[disc_role(disc, used)]
         outline = (disc.outline_xy + 0.5) * scale - 0.5
