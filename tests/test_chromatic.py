@@ -14,7 +14,7 @@ import pytest
 
 from bokehfit.discs import find_discs
 from bokehfit.fit import fit_aperture
-from bokehfit.fit.chromatic import MIN_CHROMATIC, measure_chromatic
+from bokehfit.fit.chromatic import MIN_CHROMATIC, MIN_SIGNIFICANCE, measure_chromatic, median_and_bar
 from bokehfit.io import load_photo
 from bokehfit.io.colour import srgb_encode
 
@@ -71,6 +71,21 @@ def test_a_lens_without_colour_error_gets_no_chromatic_model():
     fit = fit_aperture(luminance(rgb), find_discs(luminance(rgb)).discs, shapes=["circle"],
                        rgb=lambda rows, cols: rgb[rows, cols])
     assert fit.aperture.chromatic is None and fit.parameters["chromatic"].value is None
+
+
+def test_a_few_discs_that_agree_by_chance_are_not_significant():
+    """Four discs whose red ratios spread by their own scatter: 4.8 standard errors from 0, past a normal 3σ but not
+    past Student's t with 3 degrees of freedom (9.2); the same scatter over twelve discs is (t with 11: 3.85). Where
+    the discs agree exactly, the error is what their size lets a channel tell, known: 3 errors suffice."""
+    four = np.array([[-0.015, 0.0], [-0.025, 0.0], [-0.030, 0.0], [-0.020, 0.0]])
+    median, error, bar = median_and_bar(four, [0.001] * 4)
+    assert abs(median[0]) / error[0] == pytest.approx(4.84, abs=0.01)
+    assert abs(median[0]) > MIN_SIGNIFICANCE * error[0] and abs(median[0]) < bar[0]
+    median, error, bar = median_and_bar(np.tile(four, (3, 1)), [0.001] * 12)
+    assert abs(median[0]) > bar[0] and bar[0] / error[0] == pytest.approx(3.85, abs=0.01)
+    same = np.tile([[0.015, 0.0]], (6, 1))
+    median, error, bar = median_and_bar(same, [0.0079] * 6)
+    assert bar[0] == pytest.approx(MIN_SIGNIFICANCE * error[0]) and abs(median[0]) > bar[0]
 
 
 def test_through_a_jpeg_and_the_fit(tmp_path):
