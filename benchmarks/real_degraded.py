@@ -9,7 +9,9 @@ Each photo of ``reference_photos/manifest.json`` that is present is compared as 
 copies made here (8-bit, no metadata, so the f-stop is left out of the comparison):
 
 - ``jpeg60``: re-encoded as JPEG at quality 60;
-- ``noise``: Gaussian noise of σ 0.02 added to the encoded values (0–1), then 8-bit PNG;
+- ``noise``: Gaussian noise of σ 0.02 added to the encoded values (0–1), then 8-bit PNG; the draw is
+  the copy's own (:func:`copy_rng`: seeded by the photo's name and the variant), the same whichever
+  photos are run and in ``tests/test_reference_degraded.py``;
 - ``half``: half the size (area averaging);
 - ``rot90``: turned by 90°; ``rot33``: turned by 33° about the centre on a canvas that holds
   the whole photo (the corners black);
@@ -26,6 +28,7 @@ or JPEG made into a lens feature); the summary counts those copies. It asserts n
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import math
 import sys
@@ -46,6 +49,13 @@ from bokehfit.compare import compare_photo  # noqa: E402
 VARIANTS = ("jpeg60", "noise", "half", "rot90", "rot33", "mirror")
 NOISE_SIGMA = 0.02
 SEED = 7
+
+
+def copy_rng(name: str, variant: str) -> np.random.Generator:
+    """The random draws of one copy: seeded by SEED, the photo's file name and the variant, so that a copy is the
+    same whichever photos and variants are run (``--only``, ``--variants``) and in the tests."""
+    digest = hashlib.sha256(f"{name}/{variant}".encode("utf-8")).digest()
+    return np.random.default_rng([SEED, int.from_bytes(digest[:8], "little")])
 
 
 def degrade(image: np.ndarray, variant: str, rng: np.random.Generator) -> tuple[np.ndarray, str]:
@@ -128,7 +138,6 @@ def main(argv=None) -> int:
     parser.add_argument("--json", type=Path, help="write the table as JSON")
     args = parser.parse_args(argv)
     manifest = json.loads(MANIFEST.read_text(encoding="utf-8"))
-    rng = np.random.default_rng(SEED)
     tally: Counter = Counter()
     rows = []
     with tempfile.TemporaryDirectory() as folder:
@@ -146,7 +155,7 @@ def main(argv=None) -> int:
             image = cv2.imread(str(path), cv2.IMREAD_COLOR)
             row = {"file": entry["file"], "original": original, "copies": {}}
             for variant in args.variants:
-                copy, suffix = degrade(image, variant, rng)
+                copy, suffix = degrade(image, variant, copy_rng(entry["file"], variant))
                 out = Path(folder) / f"{Path(entry['file']).stem}_{variant}{suffix}"
                 params = [cv2.IMWRITE_JPEG_QUALITY, 60] if suffix == ".jpg" else []
                 cv2.imwrite(str(out), copy, params)
