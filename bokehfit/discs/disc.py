@@ -177,12 +177,11 @@ class DiscSearch:
         """Why nothing was found (empty when discs were found)."""
         if self.discs:
             return ""
+        why = ", ".join(f"{n} {reason}" for reason, n in self.rejected.most_common())
         if self.given:
-            why = ", ".join(f"{n} {reason}" for reason, n in self.rejected.most_common())
             return f"no disc at the {self.candidates} places given ({why})" if self.candidates else "no places given"
         if not self.candidates:
             return "no highlight stands out from the background"
-        why = ", ".join(f"{n} {reason}" for reason, n in self.rejected.most_common())
         return f"no disc among {self.candidates} highlight candidates ({why})"
 
 

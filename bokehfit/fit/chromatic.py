@@ -59,7 +59,8 @@ from bokehfit.apertures import Chromatic
 from bokehfit.discs import Disc
 from bokehfit.discs.measure import outline_diameter
 
-__all__ = ["ChromaticMeasure", "measure_chromatic", "median_and_bar", "MIN_DISCS", "MIN_SIGNIFICANCE", "MIN_CHROMATIC", "CHANNEL_EDGE_PX"]
+__all__ = ["ChromaticMeasure", "measure_chromatic", "median_and_bar", "MIN_DISCS", "MIN_SIGNIFICANCE", "MIN_CHROMATIC",
+           "CHANNEL_EDGE_PX"]
 
 #: Fewest discs measured in all three channels for a value.
 MIN_DISCS = 3
