@@ -58,9 +58,8 @@ def test_a_degraded_copy_adds_no_lens_feature(compared, reference_photo, tmp_pat
 WEAK_05, WEAK_15 = "05_backlit-grass_unsplash-522b53fb137bb.jpg", "15_water-web_tom-kijas.jpg"
 #: Known failure, measured: photo 05's discs stand 5-7 % above the grass, and noise of σ 0.02 gives its copies a rim or
 #: a cat-eye in 5 of 6 draws (seeds 0-5: rim +0.39 and vignetting, rim +0.30 and vignetting, rim +0.40, rim +0.36,
-#: vignetting, none), this copy's draw a vignetting. The joint BIC counts every pixel of a crop as independent, and
-#: the residual of faint discs over textured grass is not: a feature that soaks up correlated residual gains more
-#: than it should. Left open in issue 21 (benchmarks/RESULTS.md).
+#: vignetting, none), this copy's draw a vignetting (ΔBIC 132, with any one disc left out too). Left open in issue 21:
+#: counting the residual's correlated pixels as fewer does not single it out (benchmarks/RESULTS.md).
 NOISY_05 = pytest.mark.xfail(strict=True, reason="noise gives photo 05's faint discs a lens feature (known, issue 21)")
 
 
