@@ -260,4 +260,4 @@ def rejection_lines(detection: dict) -> list[str]:
     named = counts[:REJECTION_REASONS_NAMED]
     rest = sum(n for _, n in counts[REJECTION_REASONS_NAMED:])
     words = ", ".join(f"{n} {why}" for why, n in named) + (f", {rest} for other reasons" if rest else "")
-    return [f"not discs: {words} (each place with its reason: the JSON's detection.rejections)"]
+    return [f"not discs: {words} (each with its place and reason: --json's detection.rejections)"]

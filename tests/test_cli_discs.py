@@ -64,6 +64,7 @@ def test_table_json_and_overlay(photo, tmp_path):
         assert len(rejection["center_xy"]) == 2 and rejection["diameter_px"] > 0
         listed[rejection["rejected_because"]] = listed.get(rejection["rejected_because"], 0) + 1
     assert listed and listed == {k: n for k, n in detection["rejected"].items() if "beyond the" not in k}
+    assert "not discs: " in done.stdout and "detection.rejections" in done.stdout  # counted by reason on the terminal
     overlay = cv2.imread(str(tmp_path / "d.png"))
     assert overlay.shape == (260, 400, 3)
     assert (np.abs(overlay.astype(int) - overlay[..., ::-1].astype(int)).sum(axis=2) > 60).sum() > 200  # coloured outlines

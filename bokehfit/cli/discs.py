@@ -12,6 +12,7 @@ from bokehfit.errors import InputError, NoResultError
 from bokehfit.io import load_photo
 from bokehfit.output_paths import check_output_path
 from bokehfit.outputs import write_json, write_png
+from bokehfit.words import rejection_lines
 
 __all__ = ["add_parser", "run", "SCHEMA_VERSION"]
 
@@ -88,6 +89,13 @@ def run(args: argparse.Namespace) -> DiscSearch:
     print(f"{photo.path.name}: {photo.width}×{photo.height}, {photo.colour_space}; {photo.linearisation}")
     for note in (*photo.notes, *search.notes):
         print(f"note: {note}")
+    detection = {
+        "candidates": search.candidates,
+        "rejected": dict(search.rejected),
+        "min_diameter_px": args.min_diameter_px,
+        "max_diameter_px": args.max_diameter_px,
+        "rejections": [r.to_json() for r in search.rejections],
+    }
     if "json" in outputs:
         write_json(
             outputs["json"],
@@ -96,13 +104,7 @@ def run(args: argparse.Namespace) -> DiscSearch:
                 "bokehfit_version": __version__,
                 "command_line": args.command_line,
                 "input": photo.input_json(),
-                "detection": {
-                    "candidates": search.candidates,
-                    "rejected": dict(search.rejected),
-                    "min_diameter_px": args.min_diameter_px,
-                    "max_diameter_px": args.max_diameter_px,
-                    "rejections": [r.to_json() for r in search.rejections],
-                },
+                "detection": detection,
                 "discs": [disc.to_json() for disc in search.discs],
                 "timing_s": {"load": round(loaded - start, 4), "detect": round(search.time_s, 4)},
             },
@@ -121,4 +123,6 @@ def run(args: argparse.Namespace) -> DiscSearch:
         f"{len(search.discs)} discs ({used} clean enough to fit) from {search.candidates} candidates "
         f"in {search.time_s:.2f} s (loading {loaded - start:.2f} s)"
     )
+    for line in rejection_lines(detection):
+        print(line)
     return search
