@@ -119,10 +119,10 @@ def run(args: argparse.Namespace) -> DiscSearch:
         raise NoResultError(f"no bokeh disc found in {photo.path.name}: {search.reason}")
     used = sum(d.usable for d in search.discs)
     print(disc_table(search))
-    print(
+    for line in rejection_lines(detection):
+        print(line)
+    print(  # the last line: what was found, and in how long
         f"{len(search.discs)} discs ({used} clean enough to fit) from {search.candidates} candidates "
         f"in {search.time_s:.2f} s (loading {loaded - start:.2f} s)"
     )
-    for line in rejection_lines(detection):
-        print(line)
     return search
