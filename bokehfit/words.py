@@ -37,6 +37,7 @@ __all__ = [
     "fstop_text",
     "geometry_lines",
     "kernel_words",
+    "place_text",
     "rejection_counts",
     "rejection_lines",
     "shape_words",
@@ -247,13 +248,17 @@ def rejection_counts(detection: dict) -> list[tuple[str, int]]:
     return sorted(counts.items(), key=lambda item: (-item[1], item[0]))
 
 
+def place_text(rejection: dict) -> str:
+    """A place measured (an entry of ``detection.rejections``) as a person reads it: "(x, y), D px"."""
+    return f"({rejection['center_xy'][0]:.0f}, {rejection['center_xy'][1]:.0f}), {rejection['diameter_px']:.0f} px"
+
+
 def rejection_lines(detection: dict) -> list[str]:
     """The places measured that are no disc, for the summary: a ``detection`` of ``compare --json``. Each place a
     person gave (``places_given``) on a line of its own; a search's counted by reason (:func:`rejection_counts`),
     REJECTION_REASONS_NAMED reasons named, the rest counted together."""
-    if detection.get("places_given"):
-        return [f"not a disc at ({r['center_xy'][0]:.0f}, {r['center_xy'][1]:.0f}), {r['diameter_px']:.0f} px given: "
-                f"{r['rejected_because']}" for r in detection["rejections"]]
+    if detection["places_given"]:
+        return [f"not a disc at {place_text(r)} given: {r['rejected_because']}" for r in detection["rejections"]]
     counts = rejection_counts(detection)
     if not counts:
         return []

@@ -203,7 +203,7 @@ def test_compare_discs_fits_exactly_the_given_discs(tmp_path, gpu):
     why = detection["rejections"][0]["rejected_because"]
     assert why and f"not a disc at (40, 220), 20 px given: {why}" in done.stdout
     report = (tmp_path / "out.html").read_text(encoding="utf-8")
-    assert "Places given that are no disc" in report and "<td>(40, 220)</td>" in report
+    assert "Places given that are no disc" in report and "<td>(40, 220), 20 px</td>" in report
 
 
 def test_compare_discs_refuses_a_file_for_another_photo(tmp_path):

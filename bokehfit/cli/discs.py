@@ -94,6 +94,7 @@ def run(args: argparse.Namespace) -> DiscSearch:
         "rejected": dict(search.rejected),
         "min_diameter_px": args.min_diameter_px,
         "max_diameter_px": args.max_diameter_px,
+        "places_given": search.given,
         "rejections": [r.to_json() for r in search.rejections],
     }
     if "json" in outputs:

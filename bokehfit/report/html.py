@@ -20,8 +20,8 @@ import numpy as np
 
 from bokehfit.comparison import Comparison
 from bokehfit.uncertainty import plus_minus
-from bokehfit.words import (diameter_text, distance_text, evidence_words, fstop_text, kernel_words, rejection_counts,
-                            table_candidates)
+from bokehfit.words import (diameter_text, distance_text, evidence_words, fstop_text, kernel_words, place_text,
+                            rejection_counts, table_candidates)
 from bokehfit.fit.disc_model import model_window
 from bokehfit.metrics import METRICS
 from bokehfit.report.overlay import ROLE_BGR, disc_role, draw_disc_overlay
@@ -276,9 +276,8 @@ def _not_discs(detection: dict) -> str:
     if detection["places_given"]:
         if not detection["rejections"]:
             return ""
-        rows = [[f"({r['center_xy'][0]:.0f}, {r['center_xy'][1]:.0f})", f"{r['diameter_px']:.0f}", r["rejected_because"]]
-                for r in detection["rejections"]]
-        return "<h2>Places given that are no disc</h2>" + _table(["centre (x, y)", "diameter px", "why"], rows)
+        rows = [[place_text(r), r["rejected_because"]] for r in detection["rejections"]]
+        return "<h2>Places given that are no disc</h2>" + _table(["place (centre, diameter)", "why"], rows)
     rows = [[why, str(n)] for why, n in rejection_counts(detection)]
     if not rows:
         return ""
