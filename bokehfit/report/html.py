@@ -320,7 +320,7 @@ def build_html(comparison: Comparison, command_line: str) -> str:
         for role, b, text in (
             ("used", ROLE_BGR["used"], "used in the fit"),
             ("usable", ROLE_BGR["usable"], "usable, not needed"),
-            ("rejected", ROLE_BGR["rejected"], "rejected: saturated, cut by the frame, overlapping or too small"),
+            ("rejected", ROLE_BGR["rejected"], "rejected: cut by the frame, too little of it its own, or too small"),
         )
     )
     if given_no_disc:

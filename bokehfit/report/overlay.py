@@ -1,7 +1,7 @@
 """Draw found discs on the photo: each outline, coloured by use, with its index.
 
 One vocabulary for ``discs`` and ``compare``: a disc is *usable* when it is clean
-enough to fit (resolvable, not saturated, cut by the frame or overlapping),
+enough to fit (resolvable, within the frame, and most of its outline its own),
 *used* when the fit actually used it (``compare`` only), and *rejected* otherwise.
 """
 
@@ -16,7 +16,7 @@ __all__ = ["draw_disc_overlay", "disc_role", "ROLE_BGR", "USED_BGR", "USABLE_BGR
 
 #: Outline colours (BGR), distinct for colour-blind readers too (Okabe–Ito palette):
 #: discs used in the fit (bluish green), usable but not used (sky blue), and
-#: rejected (vermilion: saturated, cut by the frame, overlapping or too small).
+#: rejected (vermilion: cut by the frame, too little of the outline its own, or too small).
 USED_BGR = (115, 158, 0)
 USABLE_BGR = (233, 180, 86)
 FLAGGED_BGR = (0, 94, 213)
