@@ -4,7 +4,8 @@ bridged, a ring's broken rim closed, or the circle through the arcs of a rim bro
 Notes
 -----
 - **Occluded discs**: a thin occluder in front of a disc (a branch, a grass
-  blade) cuts a notch or a gap into the region above the 50 % level. A
+  blade) cuts a notch or a gap into the region above the 50 % level (of the light the
+  outline is drawn on, its pixel noise quieted: a faint disc's raw region frays all round). A
   morphological closing of that region with a disc of radius
   ``OCCLUSION_BRIDGE_REL`` · r bridges gaps up to that width; where the
   bridged pixels exceed ``OCCLUSION_MIN_SHARE`` of the area, they are given the
