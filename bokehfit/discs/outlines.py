@@ -102,15 +102,15 @@ def _closed_outline(luminance, center_xy, radius, reach, core_rel=0.8, percentil
         if plane is not None:
             crop = crop - plane.over(crop.shape)
         seed_rc = (center_xy[1] - window.r0, center_xy[0] - window.c0)
-        # The gaps are sought in the light as the outline is drawn on, its noise quieted: a faint disc's
-        # 50 % region frays at the edge pixel by pixel, and a closing of the raw region took the fraying
-        # all round for an occluder's gap or a rim's breaks, and the disc's whole outline for not its own.
+        # The gaps, and a broken rim's arcs, are sought in the light the outline is drawn on, its noise quieted:
+        # a faint disc's 50 % region frays at the edge pixel by pixel, and a closing of the raw region took the
+        # fraying all round for an occluder's gap or a rim's breaks, and the disc's whole outline for not its own.
         quiet = _quieted(crop, plateau - background, noise, radius)
         close_gaps = _close_ring if core_rel == RING_CORE_REL else _bridge_occluders
         raised = close_gaps(quiet, distance, level, plateau, radius)
         outline = _outline(raised.crop, level, background, seed_rc)
         if outline is None and core_rel == RING_CORE_REL:
-            arc = _ring_arc(crop, level, seed_rc, radius)
+            arc = _ring_arc(quiet, level, seed_rc, radius)
             if arc is not None:  # a rim that breaks: its arcs, and the circle through them
                 return Outlined(window, crop, Levels(background, plateau, noise, ring_lift), arc.points, False, None, ~arc.seen)
         if outline is None:
