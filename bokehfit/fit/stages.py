@@ -57,7 +57,7 @@ OUTLINE_SUPPORT_SHARE = 0.75
 #: its misfit to the shape the irregularity alone, so the departure exceeds the irregularity where the
 #: shape's misfit is under 1/√2 of the circle's (the median over the discs). Blades a disc's outline wanders
 #: from by as much as they depart from a circle are not seen on it (independent renders of 3 to 12 blades,
-#: rounded up to 0.8: 0.06–0.51).
+#: rounded up to 0.8: 0.06–0.50).
 OUTLINE_DEPARTURE_RATIO = 1.0 / math.sqrt(2.0)
 #: Most discs fitted jointly (the clearest first): the shared parameters are settled well before.
 JOINT_DISCS = 8
