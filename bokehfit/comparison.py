@@ -268,9 +268,7 @@ class Comparison:
         lines.extend(self.fstop_lines(data))
         if aperture["angle_note"]:
             lines.append(aperture["angle_note"])
-        ranked = ", ".join(f"{c['display_name']} (ΔBIC {c['delta_bic']:.0f}{', the same answer' if c['role'] == 'same_answer' else ''})"
-                           for c in table_candidates(aperture)[1:])
-        lines.append(f"runners-up: {ranked or 'none'}")
+        lines.append(runners_up_line(table_candidates(aperture)))
         lines.append("metrics (discs vs kernel, median): " + ", ".join(
             f"{k} {v:.4f}" for k, v in data["metrics"].items() if v is not None))
         lines.append("time: " + ", ".join(f"{k} {v:.2f} s" for k, v in data["timing_s"].items())
@@ -301,6 +299,20 @@ class Comparison:
 def _alone(fit) -> str:
     """Why a fit names no runner-up: only one shape was tried, or the others' outlines were too far off to fit."""
     return "no other shape fits the outlines" if fit.others_screened else "only one shape was tried"
+
+
+def runners_up_line(candidates: list[dict]) -> str:
+    """The summary's runners-up line: each model's ΔBIC above the model that explains the pixels best (as the
+    JSON's ``delta_bic`` and the report's table give it); where the answer is not that model (the consensus
+    or the outlines set it aside), the line says so and gives the answer's own ΔBIC, so that the verdict's
+    margin over the runner-up reads as the difference of the two."""
+    ranked = ", ".join(f"{c['display_name']} (ΔBIC {c['delta_bic']:.0f}{', the same answer' if c['role'] == 'same_answer' else ''})"
+                       for c in candidates[1:])
+    if not candidates or round(candidates[0]["delta_bic"]) <= 0:
+        return f"runners-up: {ranked or 'none'}"
+    best = min(candidates, key=lambda c: c["delta_bic"])
+    return (f"runners-up (ΔBIC above the {best['display_name']} the pixels favour; the answer's own "
+            f"{candidates[0]['delta_bic']:.0f}): {ranked}")
 
 
 def _with_roles(fit: ApertureFit, candidates: list[dict]) -> tuple[list[dict], dict | None]:

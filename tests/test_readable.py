@@ -235,3 +235,18 @@ def test_places_that_are_no_disc_are_said():
     assert REJECTION_REASONS_NAMED == 4
     assert line.startswith("not discs: 9 faint, 5 the disc measured there, 4 soft edge, 1 elongated, 2 for other reasons")
     assert rejection_lines({"places_given": False, "rejected": {}, "rejections": []}) == []
+
+
+def test_the_runners_up_line_reads_beside_the_verdicts_margin(circle):
+    # The answer set aside a model the pixels favour: the line's ΔBICs are above that model's, and it
+    # gives the answer's own, so the verdict's margin over the runner-up is the difference of the two.
+    fit = circle.fit
+    favoured = dataclasses.replace(fit.candidates[1], delta_bic=0.0)
+    chosen = dataclasses.replace(fit.candidates[0], delta_bic=40.0)
+    rest = [dataclasses.replace(c, delta_bic=c.delta_bic + 40.0) for c in fit.candidates[2:]]
+    changed = variant(circle, candidates=[chosen, favoured, *rest])
+    line = next(line for line in changed.summary().splitlines() if line.startswith("runners-up"))
+    name = favoured.family.aperture.display_name
+    assert line.startswith(f"runners-up (ΔBIC above the {name} the pixels favour; the answer's own 40): ")
+    plain = next(line for line in circle.summary().splitlines() if line.startswith("runners-up"))
+    assert plain.startswith("runners-up: ") and "the answer's own" not in plain
