@@ -306,8 +306,8 @@ def runners_up_line(candidates: list[dict]) -> str:
     JSON's ``delta_bic`` and the report's table give it); where the answer is not that model (the consensus
     or the outlines set it aside), the line says so and gives the answer's own ΔBIC, so that the verdict's
     margin over the runner-up reads as the difference of the two."""
-    ranked = ", ".join(f"{c['display_name']} (ΔBIC {c['delta_bic']:.0f}{', the same answer' if c['role'] == 'same_answer' else ''})"
-                       for c in candidates[1:])
+    same = {"same_answer": ", the same answer"}
+    ranked = ", ".join(f"{c['display_name']} (ΔBIC {c['delta_bic']:.0f}{same.get(c['role'], '')})" for c in candidates[1:])
     if not candidates or round(candidates[0]["delta_bic"]) <= 0:
         return f"runners-up: {ranked or 'none'}"
     best = min(candidates, key=lambda c: c["delta_bic"])
