@@ -25,7 +25,7 @@ from bokehfit.optics import FStop, Geometry
 from bokehfit.uncertainty import measurable, unmeasurable_reason
 from bokehfit.words import (angle_note, article, clip_headline, describe, diameter_text, disc_problems, distance_text,
                             evidence_words, fstop_text, geometry_lines, kernel_words, rejection_lines, shape_words,
-                            table_candidates, used_as)
+                            table_candidates, unfitted_lines, used_as)
 
 __all__ = ["SCHEMA_VERSION", "Comparison"]
 
@@ -256,6 +256,8 @@ class Comparison:
                  f"{self.photo.path.name}: {photo['width']}×{photo['height']}, {len(discs)} discs "
                  f"({usable} usable, {used} used in the fit, {len(discs) - usable} rejected)"]
         lines.extend(rejection_lines(data["detection"]))
+        if self.fit:
+            lines.extend(unfitted_lines(discs, self.fit.options.max_discs))
         lines.extend(f"note: {note}" for note in photo["notes"])
         lines.extend(geometry_lines(data))
         aperture = data["aperture"]

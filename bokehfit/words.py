@@ -241,8 +241,14 @@ def kernel_words(data: dict) -> str:
 def rejection_counts(detection: dict) -> list[tuple[str, int]]:
     """A search's places that are no disc (a ``detection`` of ``compare --json``), counted by reason (the words before
     a reason's numbers), the most first."""
+    return reason_counts(detection["rejected"].items())
+
+
+def reason_counts(reasons) -> list[tuple[str, int]]:
+    """``(reason, count)`` pairs counted by the words before each reason's numbers (its head, up to " ("), the most
+    first."""
     counts: dict[str, int] = {}
-    for reason, n in detection["rejected"].items():
+    for reason, n in reasons:
         head = reason.split(" (")[0]
         counts[head] = counts.get(head, 0) + n
     return sorted(counts.items(), key=lambda item: (-item[1], item[0]))
@@ -251,6 +257,19 @@ def rejection_counts(detection: dict) -> list[tuple[str, int]]:
 def place_text(rejection: dict) -> str:
     """A place measured (an entry of ``detection.rejections``) as a person reads it: "(x, y), D px"."""
     return f"({rejection['center_xy'][0]:.0f}, {rejection['center_xy'][1]:.0f}), {rejection['diameter_px']:.0f} px"
+
+
+def unfitted_lines(discs: list[dict], max_discs: int) -> list[str]:
+    """The usable discs the fit did not use, for the summary (``discs`` of ``compare --json``): those it set
+    aside, counted by reason (:func:`reason_counts`; each disc's whole reason is in the JSON), and those it did not
+    need (it takes at most ``max_discs``, the clearest first, and screens no more once it has them)."""
+    unused = [d for d in discs if d["usable"] and not d["used"]]
+    set_aside = reason_counts((d["rejected_because"][0], 1) for d in unused if d["rejected_because"])
+    spare = len(unused) - sum(n for _, n in set_aside)
+    parts = ([", ".join(f"{n} {why}" for why, n in set_aside) + " (each disc's reason: --json's discs[].rejected_because)"]
+             if set_aside else []) + \
+        ([f"{spare} not needed (the fit takes at most {max_discs}, the clearest first)"] if spare else [])
+    return [f"usable, not fitted: {'; '.join(parts)}"] if parts else []
 
 
 def rejection_lines(detection: dict) -> list[str]:

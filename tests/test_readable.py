@@ -237,6 +237,29 @@ def test_places_that_are_no_disc_are_said():
     assert rejection_lines({"places_given": False, "rejected": {}, "rejections": []}) == []
 
 
+def test_usable_discs_the_fit_did_not_use_are_said():
+    """The usable discs left unfitted: those set aside counted by their reasons' words, those not needed counted
+    with the fit's limit; discs not usable (the header counts them as rejected) and discs used are not."""
+    from bokehfit.words import unfitted_lines
+
+    def disc(usable, used, *why):
+        return {"usable": usable, "used": used, "rejected_because": list(why)}
+
+    shape = "no aperture shape explains its outline"
+    discs = [disc(True, True), disc(False, False, "only 40% of its outline is its own"),
+             disc(True, False, f"{shape} (misfit 0.13 of its radius, at most 0.08 for a disc)"),
+             disc(True, False, f"{shape} (misfit 0.29 of its radius, at most 0.08 for a disc)"),
+             disc(True, False, "its angle is not the other discs' (+9.0° from their 12.0°, tolerance 3.0°)"),
+             disc(True, False), disc(True, False)]
+    (line,) = unfitted_lines(discs, 12)
+    assert line == ("usable, not fitted: 2 no aperture shape explains its outline, 1 its angle is not the other discs' "
+                    "(each disc's reason: --json's discs[].rejected_because); 2 not needed (the fit takes at most 12, "
+                    "the clearest first)")
+    assert unfitted_lines(discs[:2], 12) == []
+    assert unfitted_lines(discs[:3], 5) == ["usable, not fitted: 1 no aperture shape explains its outline (each disc's "
+                                            "reason: --json's discs[].rejected_because)"]
+
+
 def test_the_runners_up_line_reads_beside_the_verdicts_margin(circle):
     # The answer set aside a model the pixels favour: the line's ΔBICs are above that model's, and it
     # gives the answer's own, so the verdict's margin over the runner-up is the difference of the two.

@@ -167,7 +167,8 @@ def disagreeing(family: Family, fits: list[PixelFit], screens: list[Screen], tur
         for i, (offset, sigma) in enumerate(zip(offsets, sigmas)):
             tolerance = max(OUTLIER_SIGMAS * math.hypot(robust, sigma), MIN_ANGLE_TOLERANCE_DEG)
             if abs(offset) > tolerance and i not in out:
-                out[i] = f"its angle is {offset:+.1f}° from the other discs' ({mean:.1f}°, tolerance {tolerance:.1f}°)"
+                out[i] = (f"its angle is not the other discs' ({offset:+.1f}° from their {mean:.1f}°, "
+                          f"tolerance {tolerance:.1f}°)")
     if len(out) * 2 > len(fits):  # no majority to disagree with: keep them all, the judge will doubt
         return {}
     return out
