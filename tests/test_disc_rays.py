@@ -218,11 +218,11 @@ def test_the_rays_levels_are_each_rays_own_medians():
     at once, are each ray's own medians over its own samples (a crop cut by the frame, steps anywhere, some
     too near the rays' ends to have sides); and the closed path is the dynamic programme's, written out plainly."""
     from bokehfit.discs.levels import _median
-    from bokehfit.discs.rays import _closed_path, _Rays
+    from bokehfit.discs.rays import BAND_REL, _closed_path, _Rays
 
     rng = np.random.default_rng(5)
     crop = rng.random((90, 130)).astype(np.float32)
-    rays = _Rays(crop, (20.0, 110.0), 30.0, 0.01)  # near a corner: rays leave the crop
+    rays = _Rays(crop, (20.0, 110.0), 30.0, 0.01, BAND_REL[1] * 30.0)  # near a corner: rays leave the crop
     assert not rays.inside.all()
     at = rng.integers(0, len(rays.radii), rays.count)
     inner, outer, beyond, framed = rays.levels(np.arange(rays.count), at)

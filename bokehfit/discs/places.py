@@ -32,6 +32,7 @@ from bokehfit.discs.disc import (
     _own_outlines,
     _same_size,
 )
+from bokehfit.discs.labels import MATCH_DIAMETER_REL
 from bokehfit.discs.measure import RESOLVABLE_PX, Measurement, measure_candidate, split_cluster
 from bokehfit.discs.rays import measure_rays
 from bokehfit.discs.reasons import NoDisc, Reason
@@ -72,7 +73,9 @@ def measure_discs_at(
     rejections: list[Rejection] = []
     measurements: list[Measurement] = []
     for xy, diameter in places:
-        m = _nearer_the_asked(luminance, clipped, _measure_place(luminance, clipped, xy, diameter), xy, diameter)
+        band = asked_band(diameter)
+        m = _nearer_the_asked(luminance, clipped, _measure_place(luminance, clipped, xy, diameter, band_px=band), xy,
+                              diameter, band)
         if isinstance(m, NoDisc):
             rejection = Rejection.of(xy, diameter, m)
             rejected[rejection.rejected_because] += 1
@@ -83,8 +86,18 @@ def measure_discs_at(
     return _discs_of(measurements, len(places), rejected, start, [], rejections, None, given=True)
 
 
+def asked_band(diameter: float) -> tuple[float, float]:
+    """The radii (px) between which a person's disc of ``diameter`` has its edge, where measured by its own step:
+    the size they read, within the labels' own match (:data:`bokehfit.discs.labels.MATCH_DIAMETER_REL` either way).
+    The rays' own band (:data:`bokehfit.discs.rays.BAND_REL`, half to 1.55 times the radius) would take a
+    neighbour's bright rim crossing the disc well inside its edge for the disc's own step (reference photo 14's
+    strings of discs)."""
+    return 0.5 * diameter * (1.0 - MATCH_DIAMETER_REL), 0.5 * diameter * (1.0 + MATCH_DIAMETER_REL)
+
+
 def _measure_place(luminance, clipped, xy, diameter: float, min_diameter_px: float = 1.0,
-                   rays_after: tuple[Reason, ...] | None = None) -> Measurement | NoDisc:
+                   rays_after: tuple[Reason, ...] | None = None, band_px: tuple[float, float] | None = None
+                   ) -> Measurement | NoDisc:
     """The disc at a place and about a size (a person's pick, a circle through an edge): measured as a
     candidate there; where it overlaps others, the part of its cluster closest to the place. A
     :class:`NoDisc` where no outline of about that size can be drawn there. The measurement's own ``reason`` (its
@@ -93,38 +106,54 @@ def _measure_place(luminance, clipped, xy, diameter: float, min_diameter_px: flo
     if not (0 <= xy[0] < width and 0 <= xy[1] < height):
         return NoDisc(Reason.OUTSIDE_PHOTO)
     m = _contour_at_place(luminance, clipped, xy, diameter, min_diameter_px)
-    return _by_rays_after(luminance, clipped, m, xy, diameter, min_diameter_px, rays_after)
+    return _by_rays_after(luminance, clipped, m, xy, diameter, min_diameter_px, rays_after, band_px)
 
 
 def _by_rays_after(luminance, clipped, m: Measurement | NoDisc, xy, diameter: float, min_diameter_px: float,
-                   rays_after: tuple[Reason, ...] | None) -> Measurement | NoDisc:
+                   rays_after: tuple[Reason, ...] | None, band_px: tuple[float, float] | None = None
+                   ) -> Measurement | NoDisc:
     """The contour's measurement ``m`` at a place, or, where it finds no disc there for one of the reasons
-    ``rays_after`` (any reason: None), the disc measured there by its own step along rays, where that
-    finds a disc of about ``diameter`` at the place (a measurement that draws an outline, over a reason)."""
+    ``rays_after`` (any reason: None), the disc measured there by its own step along rays (its edge sought
+    between the radii ``band_px`` where given), where that finds a disc of about ``diameter`` at the place (a
+    measurement that draws an outline, over a reason)."""
     if isinstance(m, Measurement) and m.reason is None:
         return m
     if rays_after is not None and m.reason not in rays_after:
         return m
     # Where one level does not outline it (a faint disc over haze and its neighbours' light, discs
     # that overlap, a bright centre), the disc's own edge along rays from the place may.
-    stepped = measure_rays(luminance, clipped, xy, diameter, MIN_NOISE, min_diameter_px)
+    stepped = _stepped(luminance, clipped, xy, diameter, min_diameter_px, band_px)
     if isinstance(stepped, Measurement) and _near_place(stepped, xy, diameter) and \
             (stepped.reason is None or isinstance(m, NoDisc)):
         return stepped
     return m
 
 
-def _nearer_the_asked(luminance, clipped, m: Measurement | NoDisc, xy, diameter: float) -> Measurement | NoDisc:
+def _nearer_the_asked(luminance, clipped, m: Measurement | NoDisc, xy, diameter: float,
+                      band_px: tuple[float, float] | None = None) -> Measurement | NoDisc:
     """A disc asked for at a place and size (a person's pick, a circle of a size the search found) ``m``
     measured there by its contour, or, where that size is more than ASKED_SIZE_RATIO off the ``diameter``
-    asked, by its own step along rays if that comes out nearer it."""
+    asked, by its own step along rays (its edge sought between the radii ``band_px`` where given) if that
+    comes out nearer it."""
     if not isinstance(m, Measurement) or m.own_step or abs(math.log(m.diameter_px / diameter)) <= math.log(ASKED_SIZE_RATIO):
         return m
-    stepped = measure_rays(luminance, clipped, xy, diameter, MIN_NOISE, 1.0)
+    stepped = _stepped(luminance, clipped, xy, diameter, 1.0, band_px)
     if isinstance(stepped, Measurement) and stepped.reason is None and _near_place(stepped, xy, diameter) and \
             abs(math.log(stepped.diameter_px / diameter)) < abs(math.log(m.diameter_px / diameter)):
         return stepped
     return m
+
+
+def _stepped(luminance, clipped, xy, diameter: float, min_diameter_px: float,
+             band_px: tuple[float, float] | None) -> Measurement | NoDisc:
+    """The disc at a place measured by its own step along rays: its edge sought between the radii ``band_px``
+    where given and a disc is found there, else within the rays' own band (a reading near the edge of its
+    tolerance, a soap bubble's rim read as its whole disc, may put the edge just outside ``band_px``)."""
+    if band_px is not None:
+        m = measure_rays(luminance, clipped, xy, diameter, MIN_NOISE, min_diameter_px, band_px)
+        if isinstance(m, Measurement) and m.reason is None:
+            return m
+    return measure_rays(luminance, clipped, xy, diameter, MIN_NOISE, min_diameter_px)
 
 
 def _near_place(m: Measurement, xy, diameter: float) -> bool:

@@ -151,12 +151,12 @@ def _closed_path(strength: np.ndarray, reach: int) -> np.ndarray:
 class _Rays:
     """The light along the rays around a centre, and the steps of the edge measured on them."""
 
-    def __init__(self, crop, centre_rc, radius, noise):
+    def __init__(self, crop, centre_rc, radius, noise, farthest):
         self.count = int(np.clip(round(2.0 * math.pi * radius / 3.0), *RAYS))
         self.step = max(MIN_STEP_PX, RADIAL_STEP_REL * radius)
         self.gap = max(1, int(round(max(GAP_MIN_PX, GAP_REL * radius) / self.step)))
         self.side = max(1, int(round(max(SIDE_MIN_PX, SIDE_REL * radius) / self.step)))
-        reach = BAND_REL[1] * radius + (self.gap + 2 * self.side + 2) * self.step
+        reach = farthest + (self.gap + 2 * self.side + 2) * self.step
         self.radii = np.arange(0.0, reach, self.step)
         self.profile, self.inside, self.angles = _polar(crop, centre_rc, self.count, self.radii)
         self.slope = ndimage.gaussian_filter1d(self.profile, max(1.0, 1.0 / self.step), axis=1, order=1) / self.step
@@ -244,12 +244,13 @@ def _fill(angles: np.ndarray, edge: np.ndarray, on: np.ndarray) -> np.ndarray:
     return np.where(on, edge, np.interp(angles, turn, np.tile(edge[order], 3)))
 
 
-def _trace(crop, centre_rc, radius, noise) -> tuple[np.ndarray, np.ndarray, Levels] | NoDisc:
-    """One pass: the outline (x, y in the crop) with its seen rays, and the levels; or why there is none."""
-    rays = _Rays(crop, centre_rc, radius, noise)
+def _trace(crop, centre_rc, radius, noise, band_px) -> tuple[np.ndarray, np.ndarray, Levels] | NoDisc:
+    """One pass: the outline (x, y in the crop) with its seen rays, and the levels; or why there is none. The
+    edge is sought between the radii ``band_px`` (least, most)."""
+    rays = _Rays(crop, centre_rc, radius, noise, band_px[1])
     strength = np.maximum(-rays.slope, 0.0)
     strength = ndimage.gaussian_filter1d(strength, 1.0, axis=0, mode="wrap")
-    band = (rays.radii >= BAND_REL[0] * radius) & (rays.radii <= BAND_REL[1] * radius)
+    band = (rays.radii >= band_px[0]) & (rays.radii <= band_px[1])
     strength[:, ~band] = 0.0
     strength[~rays.inside] = 0.0  # the frame's edge is no step of the disc's
     reach = max(1, math.ceil(MAX_SLOPE * radius * 2.0 * math.pi / rays.count / rays.step))
@@ -328,10 +329,13 @@ def measure_rays(
     diameter_px: float,
     min_noise: float,
     min_diameter_px: float,
+    band_px: tuple[float, float] | None = None,
 ) -> Measurement | NoDisc:
     """Measure the disc of about ``diameter_px`` around ``center_xy`` by the step of its edge along
     rays (the module's Notes); a :class:`~bokehfit.discs.reasons.NoDisc` where no outline of a disc is there.
 
+    The edge is sought between the radii ``band_px`` (least, most: px from the centre), where the size is known
+    that well (a person's reading of it); by default between BAND_REL of each pass's radius.
     Two passes: the second from the first's centre and size. The outline points of rays that do not
     show the disc's own edge are marked not seen (``outline_reliable``); the measurement's tests of a
     disc are :func:`bokehfit.discs.measure.describe`'s, with the crop's pixel noise as its noise.
@@ -340,7 +344,8 @@ def measure_rays(
     radius = max(1.0, 0.5 * float(diameter_px))
     found = None
     for _ in range(2):
-        margin = BAND_REL[1] * radius + max(GAP_MIN_PX, GAP_REL * radius) + max(SIDE_MIN_PX, SIDE_REL * radius) + 3.0
+        band = band_px if band_px is not None else (BAND_REL[0] * radius, BAND_REL[1] * radius)
+        margin = band[1] + max(GAP_MIN_PX, GAP_REL * radius) + max(SIDE_MIN_PX, SIDE_REL * radius) + 3.0
         col, row = center_xy
         r0, c0 = max(0, int(math.floor(row - margin))), max(0, int(math.floor(col - margin)))
         r1, c1 = min(height, int(math.ceil(row + margin)) + 1), min(width, int(math.ceil(col + margin)) + 1)
@@ -350,7 +355,7 @@ def measure_rays(
         noise = max(pixel_noise(raw), min_noise)
         smooth = float(np.clip(SMOOTH_REL * radius, *SMOOTH_PX))
         crop = cv2.GaussianBlur(np.ascontiguousarray(raw, np.float32), (0, 0), smooth, borderType=cv2.BORDER_REPLICATE)
-        traced = _trace(crop, (row - r0, col - c0), radius, noise)
+        traced = _trace(crop, (row - r0, col - c0), radius, noise, band)
         if isinstance(traced, NoDisc):
             return traced
         outline, seen, levels = traced
