@@ -62,6 +62,47 @@ def test_the_disc_of_a_string_is_measured_at_the_size_read(seed, monkeypatch):
     assert math.dist(wide.center_xy, CENTRE) >= 8.0 and wide.diameter_px <= 0.96 * 2.0 * RADIUS, wide
 
 
+def _polygon(points: np.ndarray, seed: int) -> np.ndarray:
+    """Linear light: a polygon of 3 % over a glow, blurred (σ 2 px), with noise of 0.003."""
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[0:400, 0:400].astype(np.float32)
+    image = 0.05 + 0.1 * np.exp(-((xx - 200.0) ** 2 + (yy - 100.0) ** 2) / (2 * 250.0 ** 2))
+    layer = np.zeros((400, 400), np.float32)
+    cv2.fillPoly(layer, [np.round(points * 16).astype(np.int32)], 0.03, cv2.LINE_AA, 4)
+    blurred = cv2.GaussianBlur((image + layer).astype(np.float32), (0, 0), 2.0)
+    return blurred + rng.normal(0.0, 0.003, blurred.shape).astype(np.float32)
+
+
+def _reach(m) -> float:
+    return float(np.max(np.hypot(*(m.outline_xy - np.array(m.center_xy)).T)))
+
+
+@pytest.mark.parametrize("shape", ["triangle", "slit"])
+def test_corners_outside_the_band_are_kept(shape):
+    """A triangle's corners lie at 1.56 equal-area radii, a slit's (aspect 0.4) at 1.5: read 10 % small, they lie
+    outside the band of the size read. Its rays there find no step, and the rays' own band keeps the corners."""
+    from bokehfit.discs.candidates import MIN_NOISE
+    from bokehfit.discs.places import _stepped
+    from bokehfit.discs.rays import measure_rays
+
+    radius, centre = 60.0, np.array([200.0, 200.0])
+    area = math.pi * radius ** 2
+    if shape == "triangle":
+        circumradius = math.sqrt(2.0 * area / (3.0 * math.sin(2.0 * math.pi / 3.0)))
+        angles = 0.3 + 2.0 * np.pi * np.arange(3) / 3.0
+        points = centre + circumradius * np.column_stack([np.cos(angles), np.sin(angles)])
+    else:
+        height = math.sqrt(area / 0.4)
+        points = centre + 0.5 * np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * np.array([0.4 * height, height])
+    image = _polygon(points, 0)
+    read = 0.9 * 2.0 * radius
+    wide = measure_rays(image, None, tuple(centre), read, MIN_NOISE, 1.0)
+    narrow = measure_rays(image, None, tuple(centre), read, MIN_NOISE, 1.0, asked_band(read))
+    kept = _stepped(image, None, tuple(centre), read, 1.0, asked_band(read))
+    assert _reach(narrow) < 0.92 * _reach(wide)  # the band alone would round the corners off
+    assert kept.diameter_px == wide.diameter_px and _reach(kept) == _reach(wide)
+
+
 def test_the_band_is_the_labels_own_match():
     low, high = asked_band(200.0)
     assert math.isclose(low, 100.0 * (1.0 - MATCH_DIAMETER_REL)) and math.isclose(high, 100.0 * (1.0 + MATCH_DIAMETER_REL))

@@ -146,14 +146,22 @@ def _nearer_the_asked(luminance, clipped, m: Measurement | NoDisc, xy, diameter:
 
 def _stepped(luminance, clipped, xy, diameter: float, min_diameter_px: float,
              band_px: tuple[float, float] | None) -> Measurement | NoDisc:
-    """The disc at a place measured by its own step along rays: its edge sought between the radii ``band_px``
-    where given and a disc is found there, else within the rays' own band (a reading near the edge of its
-    tolerance, a soap bubble's rim read as its whole disc, may put the edge just outside ``band_px``)."""
-    if band_px is not None:
-        m = measure_rays(luminance, clipped, xy, diameter, MIN_NOISE, min_diameter_px, band_px)
-        if isinstance(m, Measurement) and m.reason is None:
-            return m
-    return measure_rays(luminance, clipped, xy, diameter, MIN_NOISE, min_diameter_px)
+    """The disc at a place measured by its own step along rays: within the rays' own band and, where ``band_px`` is
+    given, also between those radii. The narrow band's disc is kept where it comes out nearer ``diameter`` and sees
+    its step on as many rays: it keeps a neighbour's bright rim crossing the disc well inside its edge from being
+    taken for the edge. Where the edge lies outside the narrow band (the corners of a triangle or a slit read a
+    little small, a disc read larger than its step, as a soap bubble's rim read as the whole disc) the rays there
+    find no step in it, and the wide band's disc is kept."""
+    wide = measure_rays(luminance, clipped, xy, diameter, MIN_NOISE, min_diameter_px)
+    if band_px is None:
+        return wide
+    narrow = measure_rays(luminance, clipped, xy, diameter, MIN_NOISE, min_diameter_px, band_px)
+    if not isinstance(narrow, Measurement) or narrow.reason is not None:
+        return wide
+    if not isinstance(wide, Measurement) or wide.reason is not None:
+        return narrow
+    nearer = abs(math.log(narrow.diameter_px / diameter)) < abs(math.log(wide.diameter_px / diameter))
+    return narrow if nearer and narrow.outline_reliable.mean() >= wide.outline_reliable.mean() else wide
 
 
 def _near_place(m: Measurement, xy, diameter: float) -> bool:
