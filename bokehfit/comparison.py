@@ -24,8 +24,8 @@ from bokehfit.kernels import Kernel
 from bokehfit.optics import FStop, Geometry
 from bokehfit.uncertainty import measurable, unmeasurable_reason
 from bokehfit.words import (angle_note, article, clip_headline, describe, diameter_text, disc_problems, distance_text,
-                            evidence_words, fstop_text, geometry_lines, kernel_words, rejection_lines, shape_words,
-                            table_candidates, unfitted_lines, used_as)
+                            evidence_words, fstop_text, geometry_lines, kernel_words, rejection_lines, runners_up_line,
+                            shape_words, table_candidates, unfitted_lines, used_as)
 
 __all__ = ["SCHEMA_VERSION", "Comparison"]
 
@@ -301,20 +301,6 @@ class Comparison:
 def _alone(fit) -> str:
     """Why a fit names no runner-up: only one shape was tried, or the others' outlines were too far off to fit."""
     return "no other shape fits the outlines" if fit.others_screened else "only one shape was tried"
-
-
-def runners_up_line(candidates: list[dict]) -> str:
-    """The summary's runners-up line: each model's ΔBIC above the model that explains the pixels best (as the
-    JSON's ``delta_bic`` and the report's table give it); where the answer is not that model (the consensus
-    or the outlines set it aside), the line says so and gives the answer's own ΔBIC, so that the verdict's
-    margin over the runner-up reads as the difference of the two."""
-    same = {"same_answer": ", the same answer"}
-    ranked = ", ".join(f"{c['display_name']} (ΔBIC {c['delta_bic']:.0f}{same.get(c['role'], '')})" for c in candidates[1:])
-    if not candidates or round(candidates[0]["delta_bic"]) <= 0:
-        return f"runners-up: {ranked or 'none'}"
-    best = min(candidates, key=lambda c: c["delta_bic"])
-    return (f"runners-up (ΔBIC above the {best['display_name']} the pixels favour; the answer's own "
-            f"{candidates[0]['delta_bic']:.0f}): {ranked}")
 
 
 def _with_roles(fit: ApertureFit, candidates: list[dict]) -> tuple[list[dict], dict | None]:

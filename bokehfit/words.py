@@ -117,6 +117,20 @@ def table_candidates(aperture: dict) -> list[dict]:
     return [candidates[0], *first, *rest]
 
 
+def runners_up_line(candidates: list[dict]) -> str:
+    """The summary's runners-up line: each model's ΔBIC above the model that explains the pixels best (as the
+    JSON's ``delta_bic`` and the report's table give it); where the answer is not that model (the consensus
+    or the outlines set it aside), the line says so and gives the answer's own ΔBIC, so that the verdict's
+    margin over the runner-up reads as the difference of the two."""
+    same = {"same_answer": ", the same answer"}
+    ranked = ", ".join(f"{c['display_name']} (ΔBIC {c['delta_bic']:.0f}{same.get(c['role'], '')})" for c in candidates[1:])
+    if not candidates or round(candidates[0]["delta_bic"]) <= 0:
+        return f"runners-up: {ranked or 'none'}"
+    best = min(candidates, key=lambda c: c["delta_bic"])
+    return (f"runners-up (ΔBIC above the {best['display_name']} the pixels favour; the answer's own "
+            f"{candidates[0]['delta_bic']:.0f}): {ranked}")
+
+
 def clip_headline(sentence: str) -> str:
     """A headline kept near :data:`HEADLINE_CHARS`: cut at a clause boundary before it when longer."""
     if len(sentence) <= HEADLINE_CHARS:

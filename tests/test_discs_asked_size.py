@@ -95,10 +95,10 @@ def test_corners_outside_the_band_are_kept(shape):
         height = math.sqrt(area / 0.4)
         points = centre + 0.5 * np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * np.array([0.4 * height, height])
     image = _polygon(points, 0)
-    read = 0.9 * 2.0 * radius
-    wide = measure_rays(image, None, tuple(centre), read, MIN_NOISE, 1.0)
-    narrow = measure_rays(image, None, tuple(centre), read, MIN_NOISE, 1.0, asked_band(read))
-    kept = _stepped(image, None, tuple(centre), read, 1.0, asked_band(read))
+    reading = 0.9 * 2.0 * radius
+    wide = measure_rays(image, None, tuple(centre), reading, MIN_NOISE, 1.0)
+    narrow = measure_rays(image, None, tuple(centre), reading, MIN_NOISE, 1.0, asked_band(reading))
+    kept = _stepped(image, None, tuple(centre), reading, 1.0, read=True)
     assert _reach(narrow) < 0.92 * _reach(wide)  # the band alone would round the corners off
     assert kept.diameter_px == wide.diameter_px and _reach(kept) == _reach(wide)
 

@@ -73,9 +73,8 @@ def measure_discs_at(
     rejections: list[Rejection] = []
     measurements: list[Measurement] = []
     for xy, diameter in places:
-        band = asked_band(diameter)
-        m = _nearer_the_asked(luminance, clipped, _measure_place(luminance, clipped, xy, diameter, band_px=band), xy,
-                              diameter, band)
+        m = _nearer_the_asked(luminance, clipped, _measure_place(luminance, clipped, xy, diameter, read=True), xy,
+                              diameter, read=True)
         if isinstance(m, NoDisc):
             rejection = Rejection.of(xy, diameter, m)
             rejected[rejection.rejected_because] += 1
@@ -96,9 +95,8 @@ def asked_band(diameter: float) -> tuple[float, float]:
 
 
 def _measure_place(luminance, clipped, xy, diameter: float, min_diameter_px: float = 1.0,
-                   rays_after: tuple[Reason, ...] | None = None, band_px: tuple[float, float] | None = None
-                   ) -> Measurement | NoDisc:
-    """The disc at a place and about a size (a person's pick, a circle through an edge): measured as a
+                   rays_after: tuple[Reason, ...] | None = None, read: bool = False) -> Measurement | NoDisc:
+    """The disc at a place and about a size (a person's pick, ``read``; a circle through an edge): measured as a
     candidate there; where it overlaps others, the part of its cluster closest to the place. A
     :class:`NoDisc` where no outline of about that size can be drawn there. The measurement's own ``reason`` (its
     tests of a disc) is left for the caller to weigh."""
@@ -106,23 +104,22 @@ def _measure_place(luminance, clipped, xy, diameter: float, min_diameter_px: flo
     if not (0 <= xy[0] < width and 0 <= xy[1] < height):
         return NoDisc(Reason.OUTSIDE_PHOTO)
     m = _contour_at_place(luminance, clipped, xy, diameter, min_diameter_px)
-    return _by_rays_after(luminance, clipped, m, xy, diameter, min_diameter_px, rays_after, band_px)
+    return _by_rays_after(luminance, clipped, m, xy, diameter, min_diameter_px, rays_after, read)
 
 
 def _by_rays_after(luminance, clipped, m: Measurement | NoDisc, xy, diameter: float, min_diameter_px: float,
-                   rays_after: tuple[Reason, ...] | None, band_px: tuple[float, float] | None = None
-                   ) -> Measurement | NoDisc:
+                   rays_after: tuple[Reason, ...] | None, read: bool = False) -> Measurement | NoDisc:
     """The contour's measurement ``m`` at a place, or, where it finds no disc there for one of the reasons
-    ``rays_after`` (any reason: None), the disc measured there by its own step along rays (its edge sought
-    between the radii ``band_px`` where given), where that finds a disc of about ``diameter`` at the place (a
-    measurement that draws an outline, over a reason)."""
+    ``rays_after`` (any reason: None), the disc measured there by its own step along rays (:func:`_stepped`; ``read``:
+    ``diameter`` is a person's reading), where that finds a disc of about ``diameter`` at the place (a measurement
+    that draws an outline, over a reason)."""
     if isinstance(m, Measurement) and m.reason is None:
         return m
     if rays_after is not None and m.reason not in rays_after:
         return m
     # Where one level does not outline it (a faint disc over haze and its neighbours' light, discs
     # that overlap, a bright centre), the disc's own edge along rays from the place may.
-    stepped = _stepped(luminance, clipped, xy, diameter, min_diameter_px, band_px)
+    stepped = _stepped(luminance, clipped, xy, diameter, min_diameter_px, read)
     if isinstance(stepped, Measurement) and _near_place(stepped, xy, diameter) and \
             (stepped.reason is None or isinstance(m, NoDisc)):
         return stepped
@@ -130,32 +127,31 @@ def _by_rays_after(luminance, clipped, m: Measurement | NoDisc, xy, diameter: fl
 
 
 def _nearer_the_asked(luminance, clipped, m: Measurement | NoDisc, xy, diameter: float,
-                      band_px: tuple[float, float] | None = None) -> Measurement | NoDisc:
+                      read: bool = False) -> Measurement | NoDisc:
     """A disc asked for at a place and size (a person's pick, a circle of a size the search found) ``m``
     measured there by its contour, or, where that size is more than ASKED_SIZE_RATIO off the ``diameter``
-    asked, by its own step along rays (its edge sought between the radii ``band_px`` where given) if that
+    asked, by its own step along rays (:func:`_stepped`; ``read``: ``diameter`` is a person's reading) if that
     comes out nearer it."""
     if not isinstance(m, Measurement) or m.own_step or abs(math.log(m.diameter_px / diameter)) <= math.log(ASKED_SIZE_RATIO):
         return m
-    stepped = _stepped(luminance, clipped, xy, diameter, 1.0, band_px)
+    stepped = _stepped(luminance, clipped, xy, diameter, 1.0, read)
     if isinstance(stepped, Measurement) and stepped.reason is None and _near_place(stepped, xy, diameter) and \
             abs(math.log(stepped.diameter_px / diameter)) < abs(math.log(m.diameter_px / diameter)):
         return stepped
     return m
 
 
-def _stepped(luminance, clipped, xy, diameter: float, min_diameter_px: float,
-             band_px: tuple[float, float] | None) -> Measurement | NoDisc:
-    """The disc at a place measured by its own step along rays: within the rays' own band and, where ``band_px`` is
-    given, also between those radii. The narrow band's disc is kept where it comes out nearer ``diameter`` and sees
-    its step on as many rays: it keeps a neighbour's bright rim crossing the disc well inside its edge from being
-    taken for the edge. Where the edge lies outside the narrow band (the corners of a triangle or a slit read a
-    little small, a disc read larger than its step, as a soap bubble's rim read as the whole disc) the rays there
-    find no step in it, and the wide band's disc is kept."""
+def _stepped(luminance, clipped, xy, diameter: float, min_diameter_px: float, read: bool) -> Measurement | NoDisc:
+    """The disc at a place measured by its own step along rays, within the rays' own band; where ``diameter`` is a
+    person's reading (``read``), also within :func:`asked_band` of it, and that disc kept where it comes out nearer
+    the size read and sees its step on as many rays. The narrow band keeps a neighbour's bright rim crossing the
+    disc well inside its edge from being taken for the edge. Where the edge lies outside it (the corners of a
+    triangle or a slit read a little small, a soap bubble read larger than its step) the rays there find no step
+    in it, or no disc at all, and the wide band's disc is kept."""
     wide = measure_rays(luminance, clipped, xy, diameter, MIN_NOISE, min_diameter_px)
-    if band_px is None:
+    if not read:
         return wide
-    narrow = measure_rays(luminance, clipped, xy, diameter, MIN_NOISE, min_diameter_px, band_px)
+    narrow = measure_rays(luminance, clipped, xy, diameter, MIN_NOISE, min_diameter_px, asked_band(diameter))
     if not isinstance(narrow, Measurement) or narrow.reason is not None:
         return wide
     if not isinstance(wide, Measurement) or wide.reason is not None:
