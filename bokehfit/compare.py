@@ -30,7 +30,7 @@ from bokehfit.io.colour import luminance_weights
 from bokehfit.judging import FAINT_CONTRAST_REL, MIN_ACCEPTABLE_IOU, MIN_SURE_DISCS, MIN_SURE_IOU, SMALL_DISC_PX, judge
 from bokehfit.kernels import AUTO, Kernel, compute_kernel
 from bokehfit.kernels.exact import coverage
-from bokehfit.metrics import METRICS, angle_error, compare_outlines
+from bokehfit.metrics import METRICS, MetricOptions, angle_error, compare_outlines
 from bokehfit.metrics.outlines import resample
 from bokehfit.optics import FStop, estimate_fstop, resolve_geometry
 
@@ -57,7 +57,8 @@ KERNEL_TOLERANCE = 0.01
 #: Points each outline is resampled to (evenly along its length) before the metrics.
 METRIC_POINTS = 256
 #: The kernel is drawn at the fitted angle, so each disc's best alignment with
-#: it is searched within this many degrees.
+#: it is searched within this many degrees (not at all where the aperture's
+#: outline turns alike: :attr:`bokehfit.apertures.Aperture.turns_alike`).
 ALIGNMENT_SEARCH_DEG = 10.0
 # The thresholds that judge a fit (MIN_SURE_IOU, SMALL_DISC_PX, ...) are bokehfit.judging's, read by the
 # pipeline's judge and by the result's verdict alike; they are importable from here too.
@@ -92,7 +93,9 @@ def disc_metrics(comparison_fit: ApertureFit, kernel_outline: np.ndarray) -> dic
 
     Where the kernel is not what a disc shows (the vignetting cuts it at its place
     in the frame; a near disc of an odd shape shows it turned), the disc is
-    compared with its own exact outline of the fitted aperture instead.
+    compared with its own exact outline of the fitted aperture instead. Each disc is turned to
+    its best alignment with that outline (within ``ALIGNMENT_SEARCH_DEG``) where the outline has
+    a rotation to align: not a plain circle's (:attr:`bokehfit.apertures.Aperture.turns_alike`).
     """
     out = {}
     symmetry = comparison_fit.aperture.symmetry_deg
@@ -102,9 +105,9 @@ def disc_metrics(comparison_fit: ApertureFit, kernel_outline: np.ndarray) -> dic
         # the kernel's colours do not change its (luminance) outline
         own = fitted.aperture != comparison_fit.seen_aperture.replace(chromatic=None) or fitted.aperture.vignetting is not None
         reference = _shown_outline(fitted, comparison_fit.diameter_px) if own else kernel_outline
-        values = compare_outlines(
-            resample(item.disc.outline_xy, METRIC_POINTS), reference, rotation_within_deg=ALIGNMENT_SEARCH_DEG
-        )
+        # A round outline needs no alignment: its rotation search cost 60 % of a disc's metrics.
+        options = MetricOptions(align=not fitted.aperture.turns_alike, rotation_within_deg=ALIGNMENT_SEARCH_DEG)
+        values = compare_outlines(resample(item.disc.outline_xy, METRIC_POINTS), reference, options=options)
         own = item.own if item.own is not None else fitted
         if symmetry is not None and own.angle_deg is not None and seen is not None:
             shown = seen + (180.0 if item.turned else 0.0)

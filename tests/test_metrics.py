@@ -501,3 +501,34 @@ def test_distance_to_an_outline_against_its_near_sides_is_the_distance_against_a
     assert len(target) > DistanceToOutline.ALL_SIDES_UP_TO  # the pruned path is the one tested
     every_side = distance_to.to_sides(points[:, 0, None], points[:, 1, None]).min(axis=1)
     np.testing.assert_array_equal(distance_to(points), every_side)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_round_kernel_needs_no_alignment(seed):
+    """compare's disc metrics skip the rotation search where the aperture's outline turns alike
+    (a plain circle: :attr:`Aperture.turns_alike`). Against the 50 % outline of a drawn circular
+    kernel (a polygon on the pixel grid, within δ of a circle), a noisy disc's IoU at its best
+    rotation within ±10° is the unturned one to a thousandth; its Hausdorff distance differs by no
+    more than 2δ (a turned copy of the kernel's outline lies within 2δ of it), the rotation search
+    chasing the pixel grid's wiggles; the descriptors do not depend on the rotation."""
+    from bokehfit.compare import ALIGNMENT_SEARCH_DEG, METRIC_POINTS, _half_outline
+    from bokehfit.kernels.exact import coverage
+    from bokehfit.metrics.outlines import resample
+
+    circle = make_aperture("circle")
+    diameter = 37.0
+    kernel = _half_outline(coverage(circle, diameter * math.sqrt(math.pi) / 2.0, 47), diameter)
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0.0, 2.0 * math.pi, 400, endpoint=False)
+    circle_xy = np.column_stack([60 + 18.5 * np.cos(t), 40 + 18.5 * np.sin(t)])
+    disc = resample(circle_xy + rng.normal(0, 0.3, (400, 2)), METRIC_POINTS)
+    turned = compare_outlines(disc, kernel, options=MetricOptions(rotation_within_deg=ALIGNMENT_SEARCH_DEG))
+    as_given = compare_outlines(disc, kernel, options=MetricOptions(align=False))
+    assert circle.turns_alike
+    assert as_given["iou"] == pytest.approx(turned["iou"], abs=1e-3)
+    normal = normalise(kernel, "kernel")
+    radii = np.hypot(*normal.T)
+    departure = float(np.max(np.abs(radii - radii.mean()))) / CIRCLE_RADIUS  # δ, in the metric's unit
+    assert departure < 0.01  # a tenth of a pixel at this size
+    assert abs(as_given["hausdorff_rel"] - turned["hausdorff_rel"]) <= 2.0 * departure + 1e-9
+    assert as_given["efd_distance"] == turned["efd_distance"] and as_given["hu_distance"] == turned["hu_distance"]

@@ -164,6 +164,22 @@ def test_symmetry_deg(shape, kwargs, symmetry):
     assert make_aperture(shape, **kwargs).symmetry_deg == pytest.approx(symmetry, rel=1e-15)
 
 
+@pytest.mark.parametrize(
+    "aperture, alike",
+    [
+        (make_aperture("circle"), True),
+        (make_aperture("circle", rim=0.4, chromatic={"red": 0.02, "blue": -0.02}), True),  # the outline is still round
+        (make_aperture("circle", squeeze=1.3), False),  # an ellipse
+        (make_aperture("circle", vignetting={"radius": 1.2, "shift": -0.5}), False),  # a lemon at the frame's edge
+        (make_aperture("hexagon"), False),
+        (make_aperture("ngon", blades=64), False),
+        (make_aperture("ngon", blades=9, roundness=1.0), False),
+    ],
+)
+def test_turns_alike_only_the_plain_uncut_circle(aperture, alike):
+    assert aperture.turns_alike is alike
+
+
 @pytest.mark.parametrize("angle", [0.0, 13.0, -47.25])
 @pytest.mark.parametrize("param", POLYGON_APERTURES, ids=_id)
 def test_outline_invariant_under_symmetry_rotation(param, angle):

@@ -128,6 +128,13 @@ class Aperture:
         return not self.has_angle and self.squeeze == 1.0
 
     @property
+    def turns_alike(self) -> bool:
+        """Whether every disc shows this outline the same at any rotation: the plain circle, with no
+        vignetting to cut it at its place in the frame (a squeeze, an aspect or the frame's cut
+        make an outline that turns). Aligning a disc's outline with such an aperture's is idle."""
+        return self.is_circle and self.vignetting is None
+
+    @property
     def label(self) -> str:
         """The shape's name as ``compare --shapes`` takes it: ``hexagon``, ``ngon(9)`` (see :func:`parse_shape`)."""
         return f"ngon({self.blades})" if self.spec.takes_blades else self.shape
