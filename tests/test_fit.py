@@ -342,6 +342,33 @@ def test_a_partial_outline_is_screened_on_its_own_points():
     assert angle_error(own.angle_deg, angle, 60.0) < 1.0
 
 
+@pytest.mark.parametrize("partial", [False, True])
+def test_the_families_screened_together_as_each_alone(partial):
+    """The screen takes every family's correlations in one FFT call (and a rounded family at each
+    roundness): each family's best angle, roundness and misfit are those it gets screened alone,
+    for a whole outline and for one seen in part, noisy so that no two families tie."""
+    from bokehfit.fit.families import FAMILIES
+    from bokehfit.fit.signature import SAMPLES, _model_signature, radial_signature, screen
+    from bokehfit.metrics.outlines import aperture_outline
+
+    rng = np.random.default_rng(5)
+    outline = aperture_outline(make_aperture("ngon", 17.0, blades=7, roundness=0.3), points=300)
+    xy = 100.0 + 40.0 * outline + rng.normal(0.0, 0.3, outline.shape)
+    seen = (np.arange(len(xy)) % 150 > 40) if partial else None
+    together = screen(xy, FAMILIES, None, seen)
+    alone = sorted((screen(xy, (family,), None, seen)[0] for family in FAMILIES), key=lambda s: s.rms)
+    assert [s.family for s in together] == [s.family for s in alone]
+    assert [s.aperture for s in together] == [s.aperture for s in alone]
+    assert [s.rms for s in together] == pytest.approx([s.rms for s in alone], rel=1e-12, abs=1e-15)
+    assert together[0].family.aperture.blades == 7, together[0].family
+    if not partial:  # each misfit is the least over all the signature's shifts, found by brute force
+        observed = radial_signature(xy)
+        for s in together:
+            model = _model_signature(s.aperture.replace(angle_deg=0.0))
+            brute = min(math.sqrt(np.mean((observed - np.roll(model, k)) ** 2)) for k in range(SAMPLES))
+            assert s.rms == pytest.approx(brute, rel=1e-9), s.family
+
+
 def test_no_disc_at_all_gives_falsy_fit():
     fit = fit_aperture(np.full((64, 64), 0.02, np.float32), [])
     assert not fit

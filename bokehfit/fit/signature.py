@@ -6,7 +6,8 @@ An outline seen from its centroid is a radius function r(θ), sampled on
 ``SAMPLES`` angles and divided by the equal-area radius. Each family's
 unit-area outline gives its own r(θ) at angle 0; turning the shape by a shifts
 the function by a, so the best angle is the circular cross-correlation's peak
-(one FFT for all shifts, refined by a parabola through the peak) and the score
+(one FFT for all shifts, of all the families' models at once, refined by a
+parabola through the peak) and the score
 is the RMS difference at that angle. A disc that shows only part of its
 outline as its own (it overlaps another) is scored on those angles alone,
 with its scale free (its equal-area radius includes the part it does not
@@ -178,28 +179,38 @@ def misalignment_deg(aperture: Aperture, other: Aperture) -> float:
 
 def _best_shift(observed: np.ndarray, model: np.ndarray, weights: np.ndarray | None = None,
                 spectra: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[float, float]:
-    """Rotation (radians) of the model that best fits, and the RMS difference there.
+    """Rotation (radians) of the model that best fits, and the RMS difference there
+    (:func:`_best_shifts` of one model)."""
+    spectra = _model_spectra(model) if spectra is None else spectra
+    shifts, rms = _best_shifts(observed, model[None], weights, (spectra[0][None], spectra[1][None]))
+    return float(shifts[0]), float(rms[0])
+
+
+def _best_shifts(observed: np.ndarray, models: np.ndarray, weights: np.ndarray | None,
+                 spectra: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Rotations (radians) of each model signature (rows of ``models``) that best fit, and the RMS
+    difference there, all models' correlations taken in one FFT call.
 
     With ``weights`` (1 where the outline is seen, 0 elsewhere) only the seen angles count, and
     the model's scale k is free: the cost over shifts s, Σw·o² − (Σw·o·mₛ)² / Σw·mₛ², is made of
-    circular correlations. ``spectra`` are the model's :func:`_model_spectra`, where the caller
-    has them already.
+    circular correlations. ``spectra`` are the models' :func:`_model_spectra`, row by row.
     """
-    spectrum, squares = _model_spectra(model) if spectra is None else spectra
+    spectrum, squares = spectra
+    rows = np.arange(len(models))
     if weights is not None:
-        cross = np.fft.irfft(np.fft.rfft(weights * observed) * spectrum, SAMPLES)
-        power = np.fft.irfft(np.fft.rfft(weights) * squares, SAMPLES)
+        cross = np.fft.irfft(np.fft.rfft(weights * observed) * spectrum, SAMPLES, axis=-1)
+        power = np.fft.irfft(np.fft.rfft(weights) * squares, SAMPLES, axis=-1)
         cost = np.sum(weights * observed**2) - cross**2 / np.maximum(power, 1e-12)
-        k = int(np.argmin(cost))
-        return k * 2 * np.pi / SAMPLES, float(np.sqrt(max(cost[k], 0.0) / max(weights.sum(), 1.0)))
-    correlation = np.fft.irfft(np.fft.rfft(observed) * spectrum, SAMPLES)
-    k = int(np.argmax(correlation))
-    left, centre, right = correlation[k - 1], correlation[k], correlation[(k + 1) % SAMPLES]
+        k = np.argmin(cost, axis=-1)
+        return k * 2 * np.pi / SAMPLES, np.sqrt(np.maximum(cost[rows, k], 0.0) / max(weights.sum(), 1.0))
+    correlation = np.fft.irfft(np.fft.rfft(observed) * spectrum, SAMPLES, axis=-1)
+    k = np.argmax(correlation, axis=-1)
+    left, centre, right = correlation[rows, k - 1], correlation[rows, k], correlation[rows, (k + 1) % SAMPLES]
     curvature = left - 2 * centre + right
-    offset = 0.5 * (left - right) / curvature if curvature < 0 else 0.0
+    offset = np.where(curvature < 0, 0.5 * (left - right) / np.where(curvature < 0, curvature, -1.0), 0.0)
     shift = (k + offset) * 2 * np.pi / SAMPLES
-    residual = observed - np.roll(model, k)
-    return shift, float(np.sqrt(np.mean(residual * residual)))
+    residual = observed - models[rows[:, None], (np.arange(SAMPLES) - k[:, None]) % SAMPLES]  # each model rolled by its k
+    return shift, np.sqrt(np.mean(residual * residual, axis=-1))
 
 
 def _model_spectra(model: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -224,23 +235,35 @@ def screen(outline_xy: np.ndarray, families: tuple[Family, ...], slit_aspect: fl
     else:
         observed, weights = partial_signature(outline_xy, reliable)
     models = {} if models is None else models
-    results = []
+    tries = []  # (family, model aperture) in the families' order, a rounded family at each roundness
     for family in families:
         aperture = family.at(aspect=slit_aspect) if slit_aspect is not None else family.aperture
-        tries = [aperture]
-        if aperture.has_roundness:
-            tries = [aperture.replace(roundness=r) for r in ROUNDNESS_GRID]
-        best = None
-        for model in tries:
+        tries += [(family, aperture.replace(roundness=r)) for r in ROUNDNESS_GRID] if aperture.has_roundness \
+            else [(family, aperture)]
+    signatures, spectra, squares = _stacked(models, [model for _, model in tries])
+    shifts, rms = _best_shifts(observed, signatures, weights, (spectra, squares))
+    best: dict[Family, int] = {}
+    for i, (family, _) in enumerate(tries):  # a family's best roundness: the first of its least misfits
+        if family not in best or rms[i] < rms[best[family]]:
+            best[family] = i
+    results = []
+    for family, i in best.items():
+        model = tries[i][1]
+        if model.has_angle:
+            model = model.replace(angle_deg=float(np.degrees(shifts[i]) % model.symmetry_deg))
+        results.append(Screen(family, model, float(rms[i])))
+    return sorted(results, key=lambda s: s.rms)
+
+
+def _stacked(models: dict, apertures: list[Aperture]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The signatures of ``apertures`` and their two spectra (:func:`_model_spectra`), stacked row by
+    row; ``models`` keeps each aperture's, and each list's stack, as they are first needed."""
+    key = tuple(apertures)
+    if key not in models:
+        for model in apertures:
             if model not in models:
                 signature = _model_signature(model)
                 models[model] = (signature, _model_spectra(signature))
-            signature, spectra = models[model]
-            shift, rms = _best_shift(observed, signature, weights, spectra)
-            if best is None or rms < best[2]:
-                best = (model, shift, rms)
-        model, shift, rms = best
-        if model.has_angle:
-            model = model.replace(angle_deg=float(np.degrees(shift) % model.symmetry_deg))
-        results.append(Screen(family, model, rms))
-    return sorted(results, key=lambda s: s.rms)
+        rows = [models[model] for model in apertures]
+        models[key] = (np.stack([r[0] for r in rows]), np.stack([r[1][0] for r in rows]), np.stack([r[1][1] for r in rows]))
+    return models[key]
