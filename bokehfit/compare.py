@@ -105,7 +105,7 @@ def disc_metrics(comparison_fit: ApertureFit, kernel_outline: np.ndarray) -> dic
         # the kernel's colours do not change its (luminance) outline
         own = fitted.aperture != comparison_fit.seen_aperture.replace(chromatic=None) or fitted.aperture.vignetting is not None
         reference = _shown_outline(fitted, comparison_fit.diameter_px) if own else kernel_outline
-        # A round outline needs no alignment: its rotation search cost 60 % of a disc's metrics.
+        # A round outline needs no alignment: its rotation search was 57 % of a disc's metrics.
         options = MetricOptions(align=not fitted.aperture.turns_alike, rotation_within_deg=ALIGNMENT_SEARCH_DEG)
         values = compare_outlines(resample(item.disc.outline_xy, METRIC_POINTS), reference, options=options)
         own = item.own if item.own is not None else fitted
