@@ -129,9 +129,7 @@ class Aperture:
 
     @property
     def turns_alike(self) -> bool:
-        """Whether every disc shows this outline the same at any rotation: the plain circle, with no
-        vignetting to cut it at its place in the frame (a squeeze, an aspect or the frame's cut
-        make an outline that turns). Aligning a disc's outline with such an aperture's is idle."""
+        """Whether a disc shows the outline alike at every rotation: the plain circle, no vignetting to cut it."""
         return self.is_circle and self.vignetting is None
 
     @property
