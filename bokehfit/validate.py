@@ -105,6 +105,11 @@ RANGES: dict[str, Range] = {
 }
 
 
+def _refused(rule: Range, name: str, value) -> InputError:
+    """The error that names what ``name`` must be and what it got (made only when a value is refused)."""
+    return InputError(f"{name} must be {rule.describe()} (got {value!r})")
+
+
 def check(quantity: str, value, *, name: str | None = None, high: float | None = None):
     """``value`` as a float (or int) inside ``RANGES[quantity]``, or ``InputError`` naming ``name``.
 
@@ -128,20 +133,18 @@ def check(quantity: str, value, *, name: str | None = None, high: float | None =
     rule = RANGES[quantity]
     if high is not None and high < rule.high:
         rule = Range(rule.low, high, rule.unit, rule.reason, rule.low_open, rule.integer, rule.allow_inf)
-    name = name or quantity
-    expected = f"{name} must be {rule.describe()} (got {value!r})"
     if isinstance(value, (bool, np.bool_)):
-        raise InputError(expected)
+        raise _refused(rule, name or quantity, value)
     if rule.integer:
         if not isinstance(value, (int, np.integer)) or not rule.contains(float(value)):
-            raise InputError(expected)
+            raise _refused(rule, name or quantity, value)
         return int(value)
     if not isinstance(value, numbers.Real):  # int, float, NumPy scalars; not text (bokehfit.cli.arg_types parses that)
-        raise InputError(expected)
+        raise _refused(rule, name or quantity, value)
     try:
         number = float(value)
     except (TypeError, ValueError, OverflowError):
-        raise InputError(expected) from None
+        raise _refused(rule, name or quantity, value) from None
     if not rule.contains(number):
-        raise InputError(expected)
+        raise _refused(rule, name or quantity, value)
     return number

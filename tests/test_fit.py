@@ -369,6 +369,29 @@ def test_the_families_screened_together_as_each_alone(partial):
             assert s.rms == pytest.approx(brute, rel=1e-9), s.family
 
 
+def test_a_memo_shared_by_outlines_of_other_aspects_screens_each_as_afresh():
+    """The families' models are made and stacked once per fit (the memo); the slit's rows follow each
+    outline's own aspect. Outlines of slits at three aspects and a hexagon, screened in turn with one
+    memo, give each what it gets screened with none, the slit's model at the outline's aspect."""
+    from bokehfit.fit.families import FAMILIES
+    from bokehfit.fit.signature import screen
+    from bokehfit.metrics.outlines import aperture_outline
+
+    rng = np.random.default_rng(8)
+    families = (*FAMILIES, *(f.rounded for f in FAMILIES if f.rounded is not None))
+    memo = {}
+    for aperture in (make_aperture("slit", 30.0, aspect=0.3), make_aperture("hexagon", 10.0),
+                     make_aperture("slit", 75.0, aspect=0.5), make_aperture("slit", 120.0, aspect=0.3)):
+        outline = aperture_outline(aperture, points=300)
+        xy = 100.0 + 40.0 * outline + rng.normal(0.0, 0.2, outline.shape)
+        aspect = aperture.aspect if aperture.aspect is not None else 1.0
+        shared, fresh = screen(xy, families, aspect, None, memo), screen(xy, families, aspect)
+        assert [(s.family, s.aperture, s.rms) for s in shared] == [(s.family, s.aperture, s.rms) for s in fresh]
+        slit = next(s for s in shared if s.family.aperture.spec.takes_aspect)
+        assert slit.aperture.aspect == aspect
+        assert shared[0].family.aperture.shape == aperture.shape
+
+
 def test_no_disc_at_all_gives_falsy_fit():
     fit = fit_aperture(np.full((64, 64), 0.02, np.float32), [])
     assert not fit

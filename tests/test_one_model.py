@@ -260,6 +260,24 @@ def test_values_are_the_parameters_and_replace_them_back():
     assert aperture.replace(**values) == aperture
 
 
+@pytest.mark.parametrize("aperture", [
+    make_aperture("circle"),
+    make_aperture("slit", 33.0, aspect=0.4).with_features("vignetting", "chromatic"),
+    make_aperture("ngon(7)", 5.0, roundness=0.3, squeeze=1.4, rim=0.2).with_features("roundness"),
+    make_aperture("star", 12.0, vignetting={"radius": 1.5, "shift": -0.4}),
+    make_aperture("mask", mask=np.eye(8)),
+])
+def test_a_turn_is_the_aperture_rebuilt_at_the_new_angle(aperture):
+    """replace(angle_deg=...) alone skips make_aperture's checks of the fields it keeps: the same
+    aperture as one rebuilt through them, and a refused angle is still refused."""
+    for angle in (0.0, -721.5, 1e9):
+        turned = aperture.replace(angle_deg=angle)
+        assert turned == aperture.replace(angle_deg=angle, squeeze=aperture.squeeze)  # rebuilt by make_aperture
+        assert turned.features == aperture.features and isinstance(turned.angle_deg, float)
+    with pytest.raises(InputError, match="angle_deg must be"):
+        aperture.replace(angle_deg=float("nan"))
+
+
 @pytest.mark.parametrize("text", ["circle", "square", "slit", "triangle", "star", "ngon(9)"])
 def test_from_json_round_trip(text):
     aperture = make_aperture(text, 17.0)

@@ -9,7 +9,10 @@ records are in :mod:`bokehfit.apertures.features`), and ``APERTURE_PARAM_FIELDS`
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
+
+from bokehfit.errors import InputError
 
 __all__ = [
     "APERTURE_PARAM_FIELDS",
@@ -18,6 +21,7 @@ __all__ = [
     "Chromatic",
     "ParameterSpec",
     "Vignetting",
+    "pair_members",
 ]
 
 
@@ -79,3 +83,13 @@ APERTURE_PARAM_FIELDS = (
     ("mask_height", "u32"),
     ("mask_cell", "f32"),
 )
+
+
+def pair_members(value, kind, keys: tuple[str, str], name: str) -> tuple:
+    """The two members of a :class:`Vignetting`/:class:`Chromatic` given as one or as a mapping (``keys``: its fields)."""
+    if isinstance(value, kind):
+        return tuple(getattr(value, key) for key in keys)
+    if isinstance(value, Mapping) and set(value) <= set(keys) and keys[0] in value:
+        return value[keys[0]], value.get(keys[1], 0.0 if kind is Vignetting else None)
+    raise InputError(f"{name} must be a {kind.__name__} or a mapping with keys {', '.join(keys)} (got {value!r})")
+

@@ -42,7 +42,7 @@ from bokehfit.apertures.frames import aperture_rows_to_image, aperture_to_image,
 from bokehfit.apertures.mask import MaskTable, load_mask
 from bokehfit.apertures.outline import Outline, Segment, clip_by_circle
 from bokehfit.apertures.parameters import (
-    APERTURE_PARAM_FIELDS, CHANNELS, VERTICES_MAX_ERROR, Chromatic, ParameterSpec, Vignetting,
+    APERTURE_PARAM_FIELDS, CHANNELS, VERTICES_MAX_ERROR, Chromatic, ParameterSpec, Vignetting, pair_members,
 )
 from bokehfit.apertures.registry import (
     DEFAULT_SLIT_ASPECT, MAX_BLADES, SHADER_FAMILIES, SHAPES, SLIT_ASPECT_RANGE, ShapeSpec, canonical_angle, parse_shape,
@@ -262,6 +262,9 @@ class Aperture:
         ``vignetting_radius``/``vignetting_shift`` and ``chromatic_red``/``chromatic_blue``
         change one member of the pair (the feature must be on).
         """
+        features = self.features if self.spec.rounds else self.features - {"roundness"}
+        if values.keys() == {"angle_deg"}:  # a turn: every other field was validated when this one was made
+            return dataclasses.replace(self, angle_deg=check("angle_deg", values["angle_deg"]), features=features)
         fields = {
             "angle_deg": self.angle_deg,
             "blades": self.blades if self.spec.takes_blades else None,
@@ -572,11 +575,11 @@ def make_aperture(
     squeeze = check("squeeze", squeeze)
     rim = check("rim", rim)
     if vignetting is not None:
-        radius, shift = _pair(vignetting, Vignetting, ("radius", "shift"), "vignetting")
+        radius, shift = pair_members(vignetting, Vignetting, ("radius", "shift"), "vignetting")
         vignetting = Vignetting(check("vignetting_radius", radius, name="vignetting.radius"),
                                 check("vignetting_shift", shift, name="vignetting.shift"))
     if chromatic is not None:
-        red, blue = _pair(chromatic, Chromatic, ("red", "blue"), "chromatic")
+        red, blue = pair_members(chromatic, Chromatic, ("red", "blue"), "chromatic")
         chromatic = Chromatic(check("chromatic", red, name="chromatic.red"), check("chromatic", blue, name="chromatic.blue"))
     if spec.tabulated:
         if mask is None:
@@ -588,13 +591,4 @@ def make_aperture(
     elif mask is not None:
         raise InputError(f"mask applies only to shape 'mask' (got a mask for {shape!r})")
     return Aperture(shape, angle_deg, blades, aspect, roundness, squeeze, vignetting, rim, chromatic, mask=mask)
-
-
-def _pair(value, kind, keys: tuple[str, str], name: str) -> tuple:
-    """The two members of a :class:`Vignetting`/:class:`Chromatic` given as one or as a mapping."""
-    if isinstance(value, kind):
-        return tuple(getattr(value, key) for key in keys)
-    if isinstance(value, Mapping) and set(value) <= set(keys) and keys[0] in value:
-        return value[keys[0]], value.get(keys[1], 0.0 if kind is Vignetting else None)
-    raise InputError(f"{name} must be a {kind.__name__} or a mapping with keys {', '.join(keys)} (got {value!r})")
 

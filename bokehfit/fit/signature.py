@@ -235,13 +235,11 @@ def screen(outline_xy: np.ndarray, families: tuple[Family, ...], slit_aspect: fl
     else:
         observed, weights = partial_signature(outline_xy, reliable)
     models = {} if models is None else models
-    tries = []  # (family, model aperture) in the families' order, a rounded family at each roundness
-    for family in families:
-        aperture = family.at(aspect=slit_aspect) if slit_aspect is not None else family.aperture
-        tries += [(family, aperture.replace(roundness=r)) for r in ROUNDNESS_GRID] if aperture.has_roundness \
-            else [(family, aperture)]
-    signatures, spectra, squares = _stacked(models, [model for _, model in tries])
+    tries, (signatures, spectra, squares), aspect_rows = _tries(models, families)
     shifts, rms = _best_shifts(observed, signatures, weights, (spectra, squares))
+    if slit_aspect is not None and len(aspect_rows):  # those rows again, their models at the outline's aspect
+        tries, (signatures, spectra, squares) = _at_aspect(models, tries, aspect_rows, slit_aspect)
+        shifts[aspect_rows], rms[aspect_rows] = _best_shifts(observed, signatures, weights, (spectra, squares))
     best: dict[Family, int] = {}
     for i, (family, _) in enumerate(tries):  # a family's best roundness: the first of its least misfits
         if family not in best or rms[i] < rms[best[family]]:
@@ -253,6 +251,35 @@ def screen(outline_xy: np.ndarray, families: tuple[Family, ...], slit_aspect: fl
             model = model.replace(angle_deg=float(np.degrees(shifts[i]) % model.symmetry_deg))
         results.append(Screen(family, model, float(rms[i])))
     return sorted(results, key=lambda s: s.rms)
+
+
+def _family_models(family: Family, slit_aspect: float | None) -> list[Aperture]:
+    """The model apertures a family is screened with: at the outline's aspect where the family has one, a
+    rounded family at each of :data:`ROUNDNESS_GRID`."""
+    aperture = family.at(aspect=slit_aspect) if slit_aspect is not None else family.aperture
+    return [aperture.replace(roundness=r) for r in ROUNDNESS_GRID] if aperture.has_roundness else [aperture]
+
+
+def _tries(models: dict, families: tuple[Family, ...]):
+    """``(family, model aperture)`` in the families' order (:func:`_family_models`), the models' signatures
+    and spectra stacked (:func:`_stacked`), and the rows of the families that take an aspect (the slit's):
+    made once per ``families`` and kept in ``models``."""
+    key = ("tries", families)
+    if key not in models:
+        tries = [(family, model) for family in families for model in _family_models(family, None)]
+        aspect_rows = np.array([i for i, (family, _) in enumerate(tries) if family.aperture.spec.takes_aspect], int)
+        models[key] = (tries, _stacked(models, [model for _, model in tries]), aspect_rows)
+    return models[key]
+
+
+def _at_aspect(models: dict, tries: list, aspect_rows: np.ndarray, slit_aspect: float):
+    """``tries`` with the rows ``aspect_rows`` at the outline's aspect, and those rows' models stacked."""
+    tries = list(tries)  # a family's rows are together, in _family_models' order
+    at_aspect = [model for family in dict.fromkeys(tries[i][0] for i in aspect_rows)
+                 for model in _family_models(family, slit_aspect)]
+    for i, model in zip(aspect_rows, at_aspect, strict=True):
+        tries[i] = (tries[i][0], model)
+    return tries, _stacked(models, at_aspect)
 
 
 def _stacked(models: dict, apertures: list[Aperture]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
