@@ -47,7 +47,6 @@ from bokehfit.metrics.outlines import (
     DistanceToOutline,
     aperture_outline,
     densify,
-    following,
     intersection_area,
     normalise,
     rotate,

@@ -19,7 +19,7 @@ from pathlib import Path
 
 from bokehfit.errors import InputError
 from bokehfit.io.photo import RAW_SUFFIXES
-from bokehfit.regular_files import file_kind, open_regular
+from bokehfit.regular_files import open_regular
 
 __all__ = ["PHOTO_SUFFIXES", "LIST_MAX_BYTES", "WALK_MAX_ENTRIES", "find_photos", "read_file_list", "content_hash"]
 

@@ -273,7 +273,6 @@ class Transport:
         self._freed.set()
 
     async def _exchange(self, connection: _Connection) -> None:
-        loop = asyncio.get_running_loop()
         limits, sock = self.limits, connection.sock
         exchange = self.exchange()
         buffer = bytearray()
