@@ -4,6 +4,7 @@ by its own arc where the blob search sees one blob; judged on a person's labels 
 from __future__ import annotations
 
 import math
+from collections import Counter
 
 import cv2
 import numpy as np
@@ -119,7 +120,7 @@ def test_a_carpet_of_small_discs_costs_the_edge_search_nothing():
 
 
 def _ring_photo(width: int, height: int, centres, diameter: float, seed: int = 3, glow: float = 0.06,
-                glow_size: float = 0.75, glow_area_px: int = 10_000) -> np.ndarray:
+                glow_size: float = 0.75, glow_area_px: int = 10_000, centre: float = 0.015) -> np.ndarray:
     """Soap-bubble rings (a rim a sixth of the radius wide, a centre a little above the ground) over lit
     ground, blurred glows of foliage of about their size and larger: the ground's light varies as much
     as the rings', so that no blob of a ring stands out of it. A glow every ``glow_area_px`` pixels,
@@ -137,7 +138,7 @@ def _ring_photo(width: int, height: int, centres, diameter: float, seed: int = 3
         r = np.hypot(xx - cx, yy - cy)
         inside = np.clip(radius - r + 0.5, 0.0, 1.0)  # the disc, its edge antialiased
         rim = np.clip((r - 0.66 * radius) / (0.17 * radius), 0.0, 1.0)  # rising to the edge
-        image += inside * (0.015 + 0.08 * rim)
+        image += inside * (centre + 0.08 * rim)
     image = cv2.GaussianBlur(image, (0, 0), 1.0)  # the edge blur
     return (image + rng.normal(0.0, 0.003, image.shape)).astype(np.float32)
 
@@ -209,3 +210,56 @@ def test_a_circle_of_a_size_found_is_a_disc_of_a_chain_where_it_crosses_a_disc_m
     assert not chain.crosses((402.0, 101.0), 72.0)  # around the 30-px disc
     assert not chain.crosses((110.0, 100.0), 40.0)  # inside the 80-px disc
     assert not _Chain([]).crosses((100.0, 100.0), 80.0)
+
+
+#: Lone rings of 24 px (under the edge search's sizes), beside discs of their size that the search measured.
+LONE_RING_DIAMETER = 24.0
+LONE_PLAIN = [(150.0 + 300.0 * i, 150.0 + 300.0 * j) for i in range(3) for j in range(3)]
+LONE_RINGS = [(x + 70.0, y) for x, y in LONE_PLAIN] + [(x, y + 70.0) for x, y in LONE_PLAIN]
+LONE_OTHERS = [(x - 70.0, y) for x, y in LONE_PLAIN]
+
+
+def _lone_ring_photo(seed: int, rings=True, flat_discs=False) -> np.ndarray:
+    """Soap-bubble rings whose centres are no brighter than the lit ground (:func:`_ring_photo`), each 70 px
+    from one of nine bright plain discs of their size, on no chain; beside each plain disc on the other side
+    a glow of the discs' size or, with ``flat_discs``, a faint flat disc of it (no rim)."""
+    d = LONE_RING_DIAMETER
+    image = _ring_photo(900, 900, LONE_RINGS if rings else [], d, seed=seed, glow=0.1, glow_size=0.5,
+                        glow_area_px=3000, centre=0.0)
+    yy, xx = np.mgrid[0:900, 0:900].astype(np.float32)
+    for cx, cy in LONE_PLAIN:
+        image += 0.3 * np.clip(0.5 * d - np.hypot(xx - cx, yy - cy) + 0.5, 0.0, 1.0)
+    for cx, cy in LONE_OTHERS:
+        r = np.hypot(xx - cx, yy - cy)
+        image += 0.05 * np.clip(0.5 * d - r + 0.5, 0.0, 1.0) if flat_discs else 0.08 * np.exp(-0.5 * (r / (0.3 * d)) ** 2)
+    return image.astype(np.float32)
+
+
+@pytest.mark.parametrize("seed", [3, 4])
+def test_a_circle_of_a_size_found_on_no_chain_is_kept_only_as_a_ring_all_round(seed, monkeypatch):
+    """The circles of a size the search measured that cross no disc of a chain (photo 04's soap-bubble rings
+    over lit juniper, which no blob and no edge circle shows) are measured as rings
+    (:func:`bokehfit.discs.search._lone_ring`): each ring is found at its size, and nothing else is: not the
+    glows or the faint flat discs of the same size beside the same discs, not the ground. Without the lone
+    circles (MAX_LONE_RINGS 0) no ring is."""
+    from bokehfit.discs import search
+    from bokehfit.discs.places import _measure_place
+
+    d = LONE_RING_DIAMETER
+
+    def sized(image):
+        measured = [_measure_place(image, None, xy, d, 8.0) for xy in LONE_PLAIN]
+        assert all(m.reason is None for m in measured)
+        search._sized_discs(image, None, measured, 8.0, 500.0, Counter(), [])
+        return measured[len(LONE_PLAIN):]
+
+    def rings_found(new):
+        return sum(any(math.dist(m.center_xy, c) < 0.15 * d and abs(m.diameter_px / d - 1) < 0.15 and m.ring
+                       for m in new) for c in LONE_RINGS)
+
+    new = sized(_lone_ring_photo(seed))
+    assert rings_found(new) >= 16 and len(new) == rings_found(new), [(m.center_xy, m.diameter_px) for m in new]
+    assert sized(_lone_ring_photo(seed, rings=False)) == []
+    assert sized(_lone_ring_photo(seed, rings=False, flat_discs=True)) == []
+    monkeypatch.setattr(search, "MAX_LONE_RINGS", 0)
+    assert sized(_lone_ring_photo(seed)) == []

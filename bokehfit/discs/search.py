@@ -28,6 +28,7 @@ import time
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from functools import partial
 
 import cv2
 import numpy as np
@@ -61,7 +62,7 @@ from bokehfit.discs.places import (
 from bokehfit.discs.rays import measure_rays
 from bokehfit.discs.reasons import NoDisc, Reason
 from bokehfit.discs.scales import PhotoScales
-from bokehfit.discs.verdict import ring_all_round
+from bokehfit.discs.verdict import rim_above_centre, ring_all_round
 from bokehfit.errors import InputError
 
 #: Smallest disc the detector seeks by default (``bokehfit discs``): glints from 4 px are counted.
@@ -111,6 +112,9 @@ MAX_CIRCLES = MAX_CANDIDATES // 10
 #: Most circles of the sizes found measured per photo (:func:`bokehfit.discs.circles.find_sized_circles`;
 #: those of the largest share of their length voting first). Each is measured in about 6 ms.
 MAX_SIZED_CIRCLES = MAX_CANDIDATES // 20
+#: Most circles of the sizes found on no chain measured per photo, as rings (:func:`_lone_ring`; those whose rim
+#: stands above their centre all round, the clearest first).
+MAX_LONE_RINGS = MAX_CANDIDATES // 20
 
 
 def find_discs(
@@ -381,29 +385,58 @@ def _sized_discs(luminance, clipped, measurements, min_diameter_px, max_diameter
     (RAYS_AFTER, from RAYS_MIN_DIAMETER_PX; from 16 px, the rays added as many bright blobs that are not
     discs to those the fit used as they found discs: RESULTS.md); and by that step where the contour's size is off the circle's
     (:func:`_nearer_the_asked`). Kept where they pass the measurement's tests of a disc and are the circle
-    voted for (its centre within SAME_DISC_CENTRE_REL of its diameter, its size within SIZE_STEP: another
-    measurement there is another light, its neighbours' merged or a glow) and still a disc of the chain.
-    A place a candidate was rejected at is measured again: the blob there was measured at its own size, not
-    the circle's. Returns how many were measured."""
+    voted for (:func:`_the_circle_voted`: another measurement there is another light, its neighbours' merged
+    or a glow) and still a disc of the chain. A place a candidate was rejected at is measured again: the blob
+    there was measured at its own size, not the circle's. Then the circles on no chain, as rings only
+    (:func:`_lone_ring`). Returns how many were measured."""
     seen = [(m.center_xy, m.diameter_px) for m in measurements]
     chain = _Chain(seen)
-    found = find_sized_circles(luminance, seen)
-    places = [(xy, d) for xy, d, _ in found if min_diameter_px <= d <= max_diameter_px and chain.crosses(xy, d)]
+    found = [(xy, d) for xy, d, _ in find_sized_circles(luminance, seen) if min_diameter_px <= d <= max_diameter_px]
 
     def measure(xy, diameter):
         rays_after = RAYS_AFTER if diameter >= RAYS_MIN_DIAMETER_PX else ()
         m = _measure_place(luminance, clipped, xy, diameter, min_diameter_px, rays_after=rays_after)
         m = _nearer_the_asked(luminance, clipped, m, xy, diameter)
-        if isinstance(m, Measurement) and not (abs(math.log(m.diameter_px / diameter)) <= math.log(SIZE_STEP)
-                                               and math.dist(m.center_xy, xy) <= SAME_DISC_CENTRE_REL * diameter
+        if isinstance(m, Measurement) and not (_the_circle_voted(m, xy, diameter)
                                                and chain.crosses(m.center_xy, m.diameter_px)):
             return NoDisc(Reason.NOT_THE_DISC_ASKED, f"the disc measured there ({m.diameter_px:.0f} px at"
                           f" {m.center_xy[0]:.0f}, {m.center_xy[1]:.0f}) is not the circle of a chain sought"
                           f" ({diameter:.0f} px)")
         return m
 
-    return _new_places(places[:MAX_SIZED_CIRCLES], seen, measure, measurements, (min_diameter_px, max_diameter_px),
-                       rejected, rejections)
+    sizes = (min_diameter_px, max_diameter_px)
+    places = [(xy, d) for xy, d in found if chain.crosses(xy, d)]
+    measured = _new_places(places[:MAX_SIZED_CIRCLES], seen, measure, measurements, sizes, rejected, rejections)
+    # Those on no chain whose rim stands above their centre all round, where one was measured (a cheap look first).
+    lone = [(xy, d) for xy, d in found if not chain.crosses(xy, d) and rim_above_centre(luminance, xy, d)]
+    seen = [(m.center_xy, m.diameter_px) for m in measurements]
+    return measured + _new_places(lone[:MAX_LONE_RINGS], seen, partial(_lone_ring, luminance, clipped,
+                                  min_diameter_px=min_diameter_px), measurements, sizes, rejected, rejections)
+
+
+def _the_circle_voted(m: Measurement, xy, diameter: float) -> bool:
+    """The measurement is the circle of a size voted for at ``xy``: its centre within SAME_DISC_CENTRE_REL
+    of the diameter, its size within SIZE_STEP."""
+    return abs(math.log(m.diameter_px / diameter)) <= math.log(SIZE_STEP) and \
+        math.dist(m.center_xy, xy) <= SAME_DISC_CENTRE_REL * diameter
+
+
+def _lone_ring(luminance, clipped, xy, diameter: float, min_diameter_px: float) -> Measurement | NoDisc:
+    """A circle of a size found that crosses no disc of a chain, kept only as a ring all round (the rule of the
+    circles through edges, RING_RAYS_AFTER): a soap-bubble disc whose centre is no brighter than the lit ground
+    around it is no blob, and beside no other disc it is no chain's; what else a circle of a disc's size
+    through edges could be, a glow, a lit leaf or the ground's texture, shows no rim above a dimmer centre all
+    round. Measured by the contour, and by its own step along rays where that finds it faint or draws no outline;
+    kept where that is a ring all round and the circle voted for (:func:`_the_circle_voted`)."""
+    m = _measure_place(luminance, clipped, xy, diameter, min_diameter_px, rays_after=())
+    if m.reason in RING_RAYS_AFTER:
+        m = _ring_by_rays(luminance, clipped, m, xy, diameter, min_diameter_px)
+    if isinstance(m, Measurement) and m.reason is None and not (
+            m.ring and ring_all_round(luminance, m) and _the_circle_voted(m, xy, diameter)):
+        return NoDisc(Reason.NOT_THE_DISC_ASKED, f"the disc measured there ({m.diameter_px:.0f} px at"
+                      f" {m.center_xy[0]:.0f}, {m.center_xy[1]:.0f}) is not a ring all round of the circle sought"
+                      f" ({diameter:.0f} px), as one on no chain must be")
+    return m
 
 
 class _Chain:

@@ -57,8 +57,8 @@ from bokehfit.discs.levels import Window, _contrast_ok, _median
 from bokehfit.discs.outlines import EDGE_WIDTH_MIN_PX, Outlined
 from bokehfit.discs.reasons import Reason
 
-__all__ = ["Measurement", "describe", "ring_all_round", "MIN_SOLIDITY", "MAX_ELONGATION", "MIN_THICKNESS_REL",
-           "RING_DIP"]
+__all__ = ["Measurement", "describe", "ring_all_round", "rim_above_centre", "MIN_SOLIDITY", "MAX_ELONGATION",
+           "MIN_THICKNESS_REL", "RING_DIP"]
 
 #: The star, the least compact aperture, has solidity 0.68.
 MIN_SOLIDITY = 0.6
@@ -261,14 +261,22 @@ def _is_ring(crop: np.ndarray, cx: float, cy: float, diameter: float, contrast: 
 def ring_all_round(luminance: np.ndarray, m: Measurement) -> bool:
     """The measured disc's rim stands above its centre (by RING_DIP of its contrast) in more than half
     of RING_SECTORS sectors of its circle, as :func:`_is_ring` measures the whole rim."""
-    window = Window.around(luminance.shape, m.center_xy, int(math.ceil(0.5 * m.diameter_px)) + 1)
+    return rim_above_centre(luminance, m.center_xy, m.diameter_px, RING_DIP * (m.plateau - m.background))
+
+
+def rim_above_centre(luminance: np.ndarray, center_xy, diameter: float, lift: float = 0.0) -> bool:
+    """The rim of the circle (``center_xy``, ``diameter``) stands above its centre by more than ``lift`` in more
+    than half of RING_SECTORS sectors (each sector's median against the centre's): :func:`ring_all_round` of a
+    measured disc, or, with no lift, of a place before it is measured (what a ring all round there needs)."""
+    window = Window.around(luminance.shape, center_xy, int(math.ceil(0.5 * diameter)) + 1)
     crop = window.of(luminance)
-    cx, cy = m.center_xy[0] - window.c0, m.center_xy[1] - window.r0
-    centre, rows, cols = _centre_and_rim(crop, cx, cy, m.diameter_px)
+    cx, cy = center_xy[0] - window.c0, center_xy[1] - window.r0
+    centre, rows, cols = _centre_and_rim(crop, cx, cy, diameter)
     if not centre.size or not rows.size:
         return False
-    sector = np.floor((np.arctan2(rows - cy, cols - cx) + math.pi) / (2.0 * math.pi) * RING_SECTORS).astype(int) % RING_SECTORS
-    values, above = crop[rows, cols], RING_DIP * (m.plateau - m.background) + float(_median(centre))
+    turn = (np.arctan2(rows - cy, cols - cx) + math.pi) / (2.0 * math.pi)
+    sector = np.floor(turn * RING_SECTORS).astype(int) % RING_SECTORS
+    values, above = crop[rows, cols], lift + float(_median(centre))
     lifted = sum(float(_median(values[sector == k])) > above for k in range(RING_SECTORS) if (sector == k).any())
     return lifted > RING_SECTORS / 2
 
