@@ -13,7 +13,6 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import pytest
 from photo_factory import reference_labels as labels_of
 
 from bokehfit.compare import compare_photo
