@@ -133,18 +133,19 @@ def check(quantity: str, value, *, name: str | None = None, high: float | None =
     rule = RANGES[quantity]
     if high is not None and high < rule.high:
         rule = Range(rule.low, high, rule.unit, rule.reason, rule.low_open, rule.integer, rule.allow_inf)
+    name = name or quantity
     if isinstance(value, (bool, np.bool_)):
-        raise _refused(rule, name or quantity, value)
+        raise _refused(rule, name, value)
     if rule.integer:
         if not isinstance(value, (int, np.integer)) or not rule.contains(float(value)):
-            raise _refused(rule, name or quantity, value)
+            raise _refused(rule, name, value)
         return int(value)
     if not isinstance(value, numbers.Real):  # int, float, NumPy scalars; not text (bokehfit.cli.arg_types parses that)
-        raise _refused(rule, name or quantity, value)
+        raise _refused(rule, name, value)
     try:
         number = float(value)
     except (TypeError, ValueError, OverflowError):
-        raise _refused(rule, name or quantity, value) from None
+        raise _refused(rule, name, value) from None
     if not rule.contains(number):
-        raise _refused(rule, name or quantity, value)
+        raise _refused(rule, name, value)
     return number

@@ -262,9 +262,8 @@ class Aperture:
         ``vignetting_radius``/``vignetting_shift`` and ``chromatic_red``/``chromatic_blue``
         change one member of the pair (the feature must be on).
         """
-        features = self.features if self.spec.rounds else self.features - {"roundness"}
-        if values.keys() == {"angle_deg"}:  # a turn: every other field was validated when this one was made
-            return dataclasses.replace(self, angle_deg=check("angle_deg", values["angle_deg"]), features=features)
+        if values.keys() == {"angle_deg"}:  # a turn: the shape and every other field as validated when made
+            return dataclasses.replace(self, angle_deg=check("angle_deg", values["angle_deg"]))
         fields = {
             "angle_deg": self.angle_deg,
             "blades": self.blades if self.spec.takes_blades else None,
