@@ -368,12 +368,20 @@ def _circle_discs(luminance, clipped, measurements, min_diameter_px, max_diamete
 
     def measure(xy, diameter):
         rays_after = RAYS_AFTER if diameter >= RAYS_MIN_DIAMETER_PX else ()
-        m = _measure_place(luminance, clipped, xy, diameter, min_diameter_px, rays_after=rays_after)
-        if m.reason in RING_RAYS_AFTER and m.reason not in rays_after:
-            m = _ring_by_rays(luminance, clipped, m, xy, diameter, min_diameter_px)
-        return m
+        return _place_or_ring(luminance, clipped, xy, diameter, min_diameter_px, rays_after)
 
     return _new_places(places, seen, measure, measurements, (min_diameter_px, max_diameter_px), rejected, rejections)
+
+
+def _place_or_ring(luminance, clipped, xy, diameter: float, min_diameter_px: float,
+                   rays_after: tuple[Reason, ...] = ()) -> Measurement | NoDisc:
+    """A circle's place measured (:func:`_measure_place`, along rays after ``rays_after``), or, where the contour
+    calls it faint or draws no outline there and the rays were not tried after that, the ring its own step along
+    rays shows there (:func:`_ring_by_rays`: RING_RAYS_AFTER)."""
+    m = _measure_place(luminance, clipped, xy, diameter, min_diameter_px, rays_after=rays_after)
+    if m.reason in RING_RAYS_AFTER and m.reason not in rays_after:
+        m = _ring_by_rays(luminance, clipped, m, xy, diameter, min_diameter_px)
+    return m
 
 
 def _sized_discs(luminance, clipped, measurements, min_diameter_px, max_diameter_px, rejected, rejections) -> int:
@@ -428,9 +436,7 @@ def _lone_ring(luminance, clipped, xy, diameter: float, min_diameter_px: float) 
     through edges could be, a glow, a lit leaf or the ground's texture, shows no rim above a dimmer centre all
     round. Measured by the contour, and by its own step along rays where that finds it faint or draws no outline;
     kept where that is a ring all round and the circle voted for (:func:`_the_circle_voted`)."""
-    m = _measure_place(luminance, clipped, xy, diameter, min_diameter_px, rays_after=())
-    if m.reason in RING_RAYS_AFTER:
-        m = _ring_by_rays(luminance, clipped, m, xy, diameter, min_diameter_px)
+    m = _place_or_ring(luminance, clipped, xy, diameter, min_diameter_px)
     if isinstance(m, Measurement) and m.reason is None and not (
             m.ring and ring_all_round(luminance, m) and _the_circle_voted(m, xy, diameter)):
         return NoDisc(Reason.NOT_THE_DISC_ASKED, f"the disc measured there ({m.diameter_px:.0f} px at"

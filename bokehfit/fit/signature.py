@@ -56,7 +56,7 @@ def partial_signature(outline_xy: np.ndarray, reliable: np.ndarray) -> tuple[np.
     Where part of the outline is not the disc's own (it runs along a neighbour), the centroid
     and the equal-area radius are not the disc's either. The centre is then the circle fitted
     to the points it shows (Kåsa's least squares), which a regular shape's sides keep near its
-    centre, and the scale is left to the comparison (:func:`_best_shift` with weights).
+    centre, and the scale is left to the comparison (:func:`_best_shifts` with weights).
     """
     points = image_to_aperture(np.asarray(outline_xy, dtype=np.float64)[:, ::-1])
     seen = np.asarray(reliable, dtype=bool)
@@ -177,12 +177,11 @@ def misalignment_deg(aperture: Aperture, other: Aperture) -> float:
     return angle_error(aperture.angle_deg - other_angle - zero, 0.0, aperture.symmetry_deg)
 
 
-def _best_shift(observed: np.ndarray, model: np.ndarray, weights: np.ndarray | None = None,
-                spectra: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[float, float]:
+def _best_shift(observed: np.ndarray, model: np.ndarray) -> tuple[float, float]:
     """Rotation (radians) of the model that best fits, and the RMS difference there
-    (:func:`_best_shifts` of one model)."""
-    spectra = _model_spectra(model) if spectra is None else spectra
-    shifts, rms = _best_shifts(observed, model[None], weights, (spectra[0][None], spectra[1][None]))
+    (:func:`_best_shifts` of one model, the whole outline seen)."""
+    spectrum, squares = _model_spectra(model)
+    shifts, rms = _best_shifts(observed, model[None], None, (spectrum[None], squares[None]))
     return float(shifts[0]), float(rms[0])
 
 
