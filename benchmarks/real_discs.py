@@ -20,7 +20,8 @@ runs ``compare`` in this process twice:
 
 and prints the whole-photo answer of each beside the label (the verdicts of
 ``benchmarks/real_photos.py``), so that a wrong answer is known to be the
-finder's or the fit's. Pooled figures close the table. It asserts nothing.
+finder's or the fit's, with each lens feature the fit tried and why it was kept
+or not (``aperture.feature_trials``). Pooled figures close the table. It asserts nothing.
 
 ``--finder-only`` runs the disc search alone (as ``compare`` runs it) and scores
 every disc it finds usable, as if the fit used them all: the recall is the same
@@ -97,8 +98,10 @@ def why_missed(comparison, score: DiscScore) -> Counter:
 
 def row(comparison, label: dict, seconds: float) -> dict:
     data = comparison.to_json("")
+    trials = (data.get("aperture") or {}).get("feature_trials") or []
     return {"answer": answer(data.get("aperture")), "status": comparison.status,
-            "verdict": judge(label, data), "reason": comparison.reason, "seconds": round(seconds, 1)}
+            "verdict": judge(label, data), "reason": comparison.reason, "seconds": round(seconds, 1),
+            "features_tried": [f"{t['feature']}, {t['reason']}" for t in trials]}
 
 
 def labelled_photos(only: list[str] | None):
@@ -221,6 +224,8 @@ def main(argv=None) -> int:
               + ", ".join(f"{n} {what}" for what, n in score.used_as.most_common())
               + f"; junk {share}; size error {'-' if error is None else f'{error:.1%}'}")
         print(f"                 {own['answer']}  {own['status']} -> {own['verdict']}")
+        for tried in own["features_tried"]:
+            print(f"                 feature tried: {tried}")
         for why, n in why_missed(comparison, score).most_common(6):
             print(f"                 missed {n} × {why}")
         for xy, size, what in score.junk_used[:6]:
@@ -237,6 +242,8 @@ def main(argv=None) -> int:
             measured[1] += len(labels.usable)
             print(f"  person's discs ({len(labels.usable)}, {mine['measured_usable']} measured usable): "
                   f"{mine['answer']}  {mine['status']} -> {mine['verdict']}  [{mine['seconds']:.1f} s]")
+            for tried in mine["features_tried"]:
+                print(f"                 feature tried: {tried}")
             result["person"] = mine
         rows.append(result)
     figures = pooled.to_json()

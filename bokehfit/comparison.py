@@ -24,8 +24,8 @@ from bokehfit.kernels import Kernel
 from bokehfit.optics import FStop, Geometry
 from bokehfit.uncertainty import measurable, unmeasurable_reason
 from bokehfit.words import (angle_note, article, clip_headline, describe, diameter_text, disc_problems, distance_text,
-                            evidence_words, fstop_text, geometry_lines, kernel_words, rejection_lines, runners_up_line,
-                            shape_words, table_candidates, unfitted_lines, used_as)
+                            evidence_words, feature_trial_lines, fstop_text, geometry_lines, kernel_words, rejection_lines,
+                            runners_up_line, shape_words, table_candidates, unfitted_lines, used_as)
 
 __all__ = ["SCHEMA_VERSION", "Comparison"]
 
@@ -271,6 +271,7 @@ class Comparison:
         if aperture["angle_note"]:
             lines.append(aperture["angle_note"])
         lines.append(runners_up_line(table_candidates(aperture)))
+        lines.extend(feature_trial_lines(aperture))
         lines.append("metrics (discs vs kernel, median): " + ", ".join(
             f"{k} {v:.4f}" for k, v in data["metrics"].items() if v is not None))
         lines.append("time: " + ", ".join(f"{k} {v:.2f} s" for k, v in data["timing_s"].items())

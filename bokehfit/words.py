@@ -34,6 +34,7 @@ __all__ = [
     "disc_problems",
     "distance_text",
     "evidence_words",
+    "feature_trial_lines",
     "fstop_text",
     "geometry_lines",
     "kernel_words",
@@ -115,6 +116,12 @@ def table_candidates(aperture: dict) -> list[dict]:
     first = [c for c in candidates if c.get("role") == "runner_up"]
     rest = sorted((c for c in candidates[1:] if c.get("role") != "runner_up"), key=lambda c: c["delta_bic"])
     return [candidates[0], *first, *rest]
+
+
+def feature_trial_lines(aperture: dict) -> list[str]:
+    """The summary's lines on the lens's features tried (the JSON's ``feature_trials``): each one, what it
+    gained and why it joined the model or did not."""
+    return [f"feature tried: {trial['feature']}, {trial['reason']}" for trial in aperture.get("feature_trials") or []]
 
 
 def runners_up_line(candidates: list[dict]) -> str:

@@ -61,6 +61,7 @@ def test_channel_sizes_are_measured(red, blue):
     assert found is not None and found.discs == len(CENTRES) and found.significant
     assert found.chromatic.red == pytest.approx(red, abs=TOL)
     assert found.chromatic.blue == pytest.approx(blue, abs=TOL)
+    assert found.reason == f"kept: {found.describe()}" and found.to_json()["kept"] is True
 
 
 def test_a_lens_without_colour_error_gets_no_chromatic_model():
@@ -71,6 +72,12 @@ def test_a_lens_without_colour_error_gets_no_chromatic_model():
     fit = fit_aperture(luminance(rgb), find_discs(luminance(rgb)).discs, shapes=["circle"],
                        rgb=lambda rows, cols: rgb[rows, cols])
     assert fit.aperture.chromatic is None and fit.parameters["chromatic"].value is None
+    # The report says what the colours measured and why that is no chromatic aberration.
+    trial = next(t for t in fit.to_json()["feature_trials"] if t["feature"] == "chromatic")
+    assert trial["kept"] is False and trial["discs"] == len(CENTRES), trial
+    assert trial["value"]["red"] == pytest.approx(found.chromatic.red, abs=1e-4), trial
+    assert trial["reason"].startswith("not kept: red ") and "6 discs can differ by chance" in trial["reason"], trial
+    assert "|red| ≥ " in trial["reason"] and "% needed" in trial["reason"], trial
 
 
 def test_a_few_discs_that_agree_by_chance_are_not_significant():

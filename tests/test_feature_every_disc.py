@@ -13,7 +13,7 @@ import pytest
 
 from bokehfit.discs import find_discs
 from bokehfit.fit import fit_aperture
-from bokehfit.fit.features import FEATURE_DELTA_BIC, gain_without_one_disc
+from bokehfit.fit.features import FEATURE_DELTA_BIC, FeatureTrial, gain_without_one_disc
 
 
 def _joint(rss: list[float], parameters: int, pixels: int = 1000):
@@ -74,9 +74,38 @@ def test_one_ring_among_flat_discs_is_no_rim_of_the_lens():
     assert sorted(d.ring for d in discs) == [False] * 3 + [True]
     fit = fit_aperture(image, discs, shapes=["circle"])
     assert "rim" not in fit.aperture.enabled_features, fit.message
+    # The report names the disc that carries the gain, which the JSON and the summary give.
+    trial = next(t for t in fit.feature_trials if t.feature == "rim")
+    ring = next(d for d in discs if d.ring)
+    assert trial.gain >= FEATURE_DELTA_BIC and not trial.kept and trial.carried_by == ring.index, trial
+    assert trial.reason.endswith(f"without disc {ring.index}: one disc's, not the lens's"), trial.reason
+    assert trial.to_json() in fit.to_json()["feature_trials"]
 
 
 def test_rings_in_every_disc_are_the_lens_s_rim():
     image = _discs([True] * 4, diameter=90.0)
     fit = fit_aperture(image, find_discs(image).discs, shapes=["circle"])
     assert "rim" in fit.aperture.enabled_features and fit.aperture.rim > 0.5, fit.message
+    trial = next(t for t in fit.feature_trials if t.feature == "rim")
+    assert trial.kept and trial.reason.startswith("kept: ΔBIC ") and trial.least_gain >= FEATURE_DELTA_BIC, trial
+
+
+def _trial(**values) -> FeatureTrial:
+    return FeatureTrial(**{"feature": "rim", "gain": 50.0, "least_gain": 40.0, "shows": True, "at_bound": False,
+                           "value": 0.3, "carried_by": 2, **values})
+
+
+@pytest.mark.parametrize("values, kept, says", [
+    ({}, True, "kept: ΔBIC 50, at least 40 with any one disc left out"),
+    ({"gain": 4.0}, False, f"not kept: ΔBIC 4 ({FEATURE_DELTA_BIC:.0f} needed)"),
+    ({"shows": False, "value": 0.01}, False, "not kept: ΔBIC 50, but its value (+0.01) is too small for discs to show"),
+    ({"at_bound": True, "value": {"radius": 1.0, "shift": -2.0}}, False,
+     "not kept: ΔBIC 50, but its value (radius +1.00, shift -2.00) is at the end of its range"),
+    ({"least_gain": -30.0, "carried_by": 7}, False, "not kept: ΔBIC 50, but -30 without disc 7: one disc's, not the lens's"),
+    ({"least_gain": -math.inf, "carried_by": None}, False, "not kept: ΔBIC 50, but from a single disc: one disc's"),
+])
+def test_a_trial_says_why_the_feature_joined_the_model_or_did_not(values, kept, says):
+    """The reason is the first of the tests that keep a feature (the order of FeatureTrial.kept) that the trial fails."""
+    trial = _trial(**values)
+    assert trial.kept is kept and trial.reason.startswith(says), trial.reason
+    assert trial.to_json()["kept"] is kept and trial.to_json()["reason"] == trial.reason

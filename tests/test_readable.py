@@ -157,7 +157,10 @@ def test_an_unsure_verdict_does_not_headline_unsupported_features(circle):
     close = variant(circle, close_runner_up=True, aperture=circle.fit.aperture.replace(chromatic=weak), seen_aperture=seen,
                     feature_uncertainty={"chromatic_red": 0.03, "chromatic_blue": 0.03})
     assert close.to_json("")["aperture"]["chromatic"] is not None
-    assert "chromatic" not in close.verdict and "chromatic" not in close.summary()
+    assert "chromatic" not in close.verdict
+    # The summary names it only as a feature tried and not kept (the discs' colours measured within chance).
+    mentions = [line for line in close.summary().splitlines() if "chromatic" in line]
+    assert all(line.startswith("feature tried: chromatic, not kept: ") for line in mentions), mentions
 
 
 def test_one_runner_up_everywhere(circle):
@@ -273,3 +276,26 @@ def test_the_runners_up_line_reads_beside_the_verdicts_margin(circle):
     assert line.startswith(f"runners-up (ΔBIC above the {name} the pixels favour; the answer's own 40): ")
     plain = next(line for line in circle.summary().splitlines() if line.startswith("runners-up"))
     assert plain.startswith("runners-up: ") and "the answer's own" not in plain
+
+
+def test_each_lens_feature_tried_says_why_it_was_kept_or_not(circle):
+    """A feature tried and set aside is named with its gain and the test it failed, in the summary, the JSON
+    and the report; so are the colours measured and found within chance."""
+    from bokehfit.apertures import Chromatic
+    from bokehfit.fit.chromatic import ChromaticMeasure
+    from bokehfit.fit.features import FeatureTrial
+
+    used = next(d["index"] for d in circle.to_json("")["discs"] if d["used"])
+    rim = FeatureTrial("rim", 122.0, -113.0, True, False, 0.23, used)
+    colours = ChromaticMeasure(Chromatic(-0.086, -0.138), Chromatic(0.026, 0.038), 6, False, Chromatic(0.15, 0.2))
+    tried = variant(circle, feature_trials=(rim,), chromatic_measure=colours)
+    rim_says = f"rim, not kept: ΔBIC 122, but -113 without disc {used}: one disc's, not the lens's"
+    colours_says = "chromatic, not kept: red -8.6 % ± 2.6, blue -13.8 % ± 3.8 from 6 discs, within what 6 discs can"
+    summary = tried.summary()
+    assert f"feature tried: {rim_says}" in summary and f"feature tried: {colours_says}" in summary, summary
+    trials = tried.to_json("")["aperture"]["feature_trials"]
+    assert [t["feature"] for t in trials] == ["rim", "chromatic"] and not any(t["kept"] for t in trials), trials
+    assert trials[0]["delta_bic_one_disc_out"] == {"least": -113.0, "disc": used}, trials
+    page = page_text(tried)
+    assert "Lens features tried" in page and rim_says.split(", ", 1)[1] in page, page
+    assert "Lens features tried" not in page_text(variant(circle, feature_trials=(), chromatic_measure=None))

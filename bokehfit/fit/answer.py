@@ -204,7 +204,7 @@ def aperture_fit(*, focus_side: str, options: FitOptions, clock: Clock, chosen: 
         time_s=clock.elapsed(),
         seen_aperture=seen_aperture,
         rejected={**chosen.set_aside, **consensus.rejected},
-        feature_tests=joint.gains,
+        feature_trials=joint.trials,
         feature_uncertainty=colours.uncertainty,
         notes=tuple(model.notes),
         chromatic_measure=colours.measure,

@@ -83,10 +83,29 @@ class ChromaticMeasure:
     uncertainty: Chromatic  #: one robust standard error of each
     discs: int  #: discs measured in all three channels
     significant: bool  #: the module's criteria are met: the photo shows chromatic aberration
+    #: The least distance of each from 0 that the discs make significant (:func:`median_and_bar`; MIN_CHROMATIC aside).
+    bar: Chromatic | None = None
 
     def describe(self) -> str:
         return (f"red {100 * self.chromatic.red:+.1f} % ± {100 * self.uncertainty.red:.1f}, blue "
                 f"{100 * self.chromatic.blue:+.1f} % ± {100 * self.uncertainty.blue:.1f} from {self.discs} discs")
+
+    @property
+    def reason(self) -> str:
+        """Why the aperture has the chromatic aberration measured, or has none, in words."""
+        if self.significant:
+            return f"kept: {self.describe()}"
+        least = "" if self.bar is None else (
+            f" (|red| ≥ {100 * max(self.bar.red, MIN_CHROMATIC):.1f} % or |blue| ≥ "
+            f"{100 * max(self.bar.blue, MIN_CHROMATIC):.1f} % needed)")
+        return f"not kept: {self.describe()}, within what {self.discs} discs can differ by chance{least}"
+
+    def to_json(self) -> dict:
+        """The measure as a trial of the ``chromatic`` feature (beside :class:`bokehfit.fit.features.FeatureTrial`'s)."""
+        return {"feature": "chromatic", "kept": self.significant, "discs": self.discs,
+                "value": {"red": round(self.chromatic.red, 4), "blue": round(self.chromatic.blue, 4)},
+                "uncertainty": {"red": round(self.uncertainty.red, 4), "blue": round(self.uncertainty.blue, 4)},
+                "reason": self.reason}
 
 
 def measure_chromatic(rgb: Callable[[slice, slice], np.ndarray], discs: Sequence[Disc],
@@ -119,7 +138,7 @@ def measure_chromatic(rgb: Callable[[slice, slice], np.ndarray], discs: Sequence
     median, error, bar = median_and_bar(np.asarray(ratios), readable)
     significant = bool(np.any((np.abs(median) >= bar) & (np.abs(median) >= MIN_CHROMATIC)))
     return ChromaticMeasure(Chromatic(float(median[0]), float(median[1])), Chromatic(float(error[0]), float(error[1])),
-                            len(ratios), significant)
+                            len(ratios), significant, Chromatic(float(bar[0]), float(bar[1])))
 
 
 def median_and_bar(values: np.ndarray, readable: Sequence[float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
@@ -27,7 +28,7 @@ from bokehfit.fit.pixels import JointFit, PixelFit
 from bokehfit.fit.vector import FIT_BOUNDS
 from bokehfit.fit.signature import Screen
 
-__all__ = ["add_feature", "at_bound", "feature_evidence", "features_to_test", "gain_without_one_disc",
+__all__ = ["add_feature", "at_bound", "feature_evidence", "FeatureTrial", "features_to_test", "gain_without_one_disc",
            "FEATURE_DELTA_BIC", "MIN_RIM",
            "VIGNETTING_MIN_FIELD"]
 
@@ -82,20 +83,87 @@ def gain_without_one_disc(before: JointFit, after: JointFit, noise: Sequence[flo
     a rim of its own (a JPEG-60 copy of reference photo 05 gained a rim and a vignetting, a mirrored copy of
     11 a vignetting, each from one disc whose own gain exceeded the whole).
     """
+    gains = gains_without_each_disc(before, after, noise)
+    return float(gains.min()) if len(gains) else -math.inf
+
+
+def gains_without_each_disc(before: JointFit, after: JointFit, noise: Sequence[float]) -> np.ndarray:
+    """The BIC that ``after`` gains over ``before`` with each disc left out in turn, by the discs' order
+    (:func:`gain_without_one_disc`); empty for a single disc."""
     if len(after.fits) < 2:
-        return -math.inf
+        return np.zeros(0)
     weight = np.maximum(np.asarray(noise, dtype=np.float64), 1e-12) ** 2
     rss_before = np.array([f.rss for f in before.fits]) / weight
     rss_after = np.array([f.rss for f in after.fits]) / weight
     pixels = np.array([f.pixels for f in after.fits], dtype=np.float64)
     added = after.parameters - before.parameters
-    least = math.inf
+    gains = np.empty(len(pixels))
     for left_out in range(len(pixels)):
         others = np.arange(len(pixels)) != left_out
         n = float(pixels[others].sum())
         gain = n * math.log(max(rss_before[others].sum(), 1e-300) / max(rss_after[others].sum(), 1e-300))
-        least = min(least, gain - added * math.log(n))
-    return least
+        gains[left_out] = gain - added * math.log(n)
+    return gains
+
+
+@dataclass(frozen=True)
+class FeatureTrial:
+    """A §3b feature tried on the joint fit: what it gained, and whether it joined the model (the module's rule)."""
+
+    feature: str
+    gain: float  #: the BIC it gained over the joint fit without it
+    least_gain: float  #: the least it gained with any one disc left out (:func:`gain_without_one_disc`)
+    shows: bool  #: its fitted value is one a photo's discs show (its record's ``least_visible``)
+    at_bound: bool  #: its fitted value sits at the end of its range (:func:`at_bound`)
+    value: object  #: its fitted value in the trial (a number, or a mapping of the pair's members)
+    carried_by: int | None = None  #: the index of the disc whose leaving out leaves the least gain (None: one disc)
+
+    @classmethod
+    def of(cls, feature: str, before: JointFit, after: JointFit, noise: Sequence[float],
+           discs: Sequence[Disc]) -> FeatureTrial:
+        """The trial of ``feature``: ``after``, the joint fit of ``discs`` with it on, against ``before``, without."""
+        spec = FEATURE_SPECS[feature]
+        gains = gains_without_each_disc(before, after, noise)
+        least, carried_by = (float(gains.min()), discs[int(np.argmin(gains))].index) if len(gains) else (-math.inf, None)
+        return cls(feature, before.bic - after.bic, least, spec.shows(after.aperture), at_bound(after.aperture, feature),
+                   spec.value(after.aperture), carried_by)
+
+    @property
+    def kept(self) -> bool:
+        """It joins the model: FEATURE_DELTA_BIC gained, with any one disc left out too, shown, not at its bound."""
+        return (self.gain >= FEATURE_DELTA_BIC and self.shows and not self.at_bound
+                and self.least_gain >= FEATURE_DELTA_BIC)
+
+    @property
+    def reason(self) -> str:
+        """Why it joined the model or did not, in words (the first test it fails, in the order of :attr:`kept`)."""
+        gain = f"ΔBIC {self.gain:.0f}"
+        if self.gain < FEATURE_DELTA_BIC:
+            return f"not kept: {gain} ({FEATURE_DELTA_BIC:.0f} needed)"
+        if not self.shows:
+            return f"not kept: {gain}, but its value ({_value_text(self.value)}) is too small for discs to show"
+        if self.at_bound:
+            return (f"not kept: {gain}, but its value ({_value_text(self.value)}) is at the end of its range: "
+                    "the discs pushed it there to absorb something else")
+        if self.least_gain < FEATURE_DELTA_BIC:
+            alone = ("from a single disc" if self.carried_by is None
+                     else f"{self.least_gain:.0f} without disc {self.carried_by}")
+            return f"not kept: {gain}, but {alone}: one disc's, not the lens's"
+        return f"kept: {gain}, at least {self.least_gain:.0f} with any one disc left out"
+
+    def to_json(self) -> dict:
+        value = ({k: round(float(v), 3) for k, v in self.value.items()} if isinstance(self.value, dict)
+                 else round(float(self.value), 3))
+        one_out = None if self.carried_by is None else {"least": round(self.least_gain, 2), "disc": self.carried_by}
+        return {"feature": self.feature, "kept": self.kept, "delta_bic": round(self.gain, 2),
+                "delta_bic_one_disc_out": one_out, "value": value, "reason": self.reason}
+
+
+def _value_text(value) -> str:
+    """A feature's value in words: a number, or the pair's members."""
+    if isinstance(value, dict):
+        return ", ".join(f"{member} {float(v):+.2f}" for member, v in value.items())
+    return f"{float(value):+.2f}"
 
 
 def feature_evidence(fits: list[PixelFit], discs: list[Disc]) -> FeatureEvidence:

@@ -250,8 +250,9 @@ class ApertureFit:
     #: Discs set aside, index → reason: outlines no aperture shape explains, and discs fitted and then
     #: left out because the others' consensus does not share them.
     rejected: dict = dataclasses.field(default_factory=dict)
-    #: Each §3b feature tried on the joint fit → the BIC it gained (added when ≥ FEATURE_DELTA_BIC).
-    feature_tests: dict = dataclasses.field(default_factory=dict)
+    #: Each §3b feature tried on the joint fit: the BIC it gained, and why it joined the model or did not
+    #: (:class:`bokehfit.fit.features.FeatureTrial`).
+    feature_trials: tuple = ()
     #: One standard deviation of each shared aperture parameter of the joint fit, by name.
     feature_uncertainty: dict = dataclasses.field(default_factory=dict)
     notes: tuple = ()  #: models set aside and why (an elongation the discs do not share)
@@ -271,6 +272,11 @@ class ApertureFit:
     @property
     def family(self) -> Family:
         return self.candidates[0].family
+
+    @property
+    def feature_tests(self) -> dict[str, float]:
+        """Each §3b feature tried on the joint fit → the BIC it gained (kept where :attr:`feature_trials` says)."""
+        return {trial.feature: trial.gain for trial in self.feature_trials}
 
     @property
     def outline_misfit(self) -> float:
@@ -333,6 +339,8 @@ class ApertureFit:
             discs_fitted=len(self.disc_fits),
             message=self.message,
             candidates=[c.to_json() for c in self.candidates],
+            feature_trials=[t.to_json() for t in self.feature_trials]
+            + ([self.chromatic_measure.to_json()] if self.chromatic_measure is not None else []),
         )
         return data
 

@@ -31,7 +31,7 @@ from bokehfit.discs import Disc
 from bokehfit.fit.agreement import combine, consensus_start, disagreeing, outline_misfits, turned_discs, unsupported
 from bokehfit.fit.choice import choose_discs, slit_aspect
 from bokehfit.fit.families import FAMILIES, Family
-from bokehfit.fit.features import FEATURE_DELTA_BIC, add_feature, at_bound, features_to_test, gain_without_one_disc
+from bokehfit.fit.features import FeatureTrial, add_feature, features_to_test
 from bokehfit.fit.crop import DiscCrop, crop_disc
 from bokehfit.fit.pixels import JointFit, PixelFit, fit_discs
 from bokehfit.fit.result import CandidateModel, DiscFit, FitOptions
@@ -312,7 +312,12 @@ class Joint:
     noise: list[float]  #: each jointly fitted disc's noise level (from its own fit)
     fit: JointFit
     tests: tuple[str, ...] = ()  #: the features tried (:func:`~bokehfit.fit.features.features_to_test`)
-    gains: dict[str, float] = dataclasses.field(default_factory=dict)  #: feature → the BIC it gained
+    trials: tuple[FeatureTrial, ...] = ()  #: each feature tried, what it gained and whether it was kept
+
+    @property
+    def gains(self) -> dict[str, float]:
+        """Each feature tried → the BIC it gained."""
+        return {trial.feature: trial.gain for trial in self.trials}
 
     @property
     def joint_crops(self) -> list[DiscCrop]:
@@ -344,17 +349,15 @@ def try_features(joint: Joint, consensus: Consensus, winner: Family) -> Joint:
     ids = joint.ids
     tests = features_to_test([consensus.fits[i] for i in ids], joint.discs, [consensus.screens[i] for i in ids],
                              joint.joint_crops)
-    gains: dict[str, float] = {}
+    trials = []
     best = joint
     for feature in tests:
         start = add_feature(best.fit.aperture, feature, best.fit.fits, joint.discs)
-        trial = fit_discs(joint.joint_crops, winner, start, noise=joint.noise, disc_starts=best.disc_starts())
-        gains[feature] = best.fit.bic - trial.bic
-        visible = FEATURE_SPECS[feature].shows(trial.aperture)
-        if gains[feature] >= FEATURE_DELTA_BIC and visible and not at_bound(trial.aperture, feature) \
-                and gain_without_one_disc(best.fit, trial, joint.noise) >= FEATURE_DELTA_BIC:
-            best = dataclasses.replace(best, fit=trial)
-    return dataclasses.replace(best, tests=tests, gains=gains)
+        fit = fit_discs(joint.joint_crops, winner, start, noise=joint.noise, disc_starts=best.disc_starts())
+        trials.append(FeatureTrial.of(feature, best.fit, fit, joint.noise, joint.discs))
+        if trials[-1].kept:
+            best = dataclasses.replace(best, fit=fit)
+    return dataclasses.replace(best, tests=tests, trials=tuple(trials))
 
 
 @dataclass(frozen=True)

@@ -23,6 +23,7 @@ from bokehfit.uncertainty import plus_minus
 from bokehfit.words import (diameter_text, distance_text, evidence_words, fstop_text, kernel_words, place_text,
                             rejection_counts, table_candidates)
 from bokehfit.fit.disc_model import model_window
+from bokehfit.fit.features import FEATURE_DELTA_BIC
 from bokehfit.metrics import METRICS
 from bokehfit.report.overlay import ROLE_BGR, disc_role, draw_disc_overlay
 
@@ -354,6 +355,13 @@ def build_html(comparison: Comparison, command_line: str) -> str:
                      "best; the words say how strongly the chosen model is preferred.</p>"
                      + _table(["model", "angle °", "ΔBIC", "evidence for the chosen", "outline misfit", "diameter px"],
                               _candidate_rows(table_candidates(aperture))))
+    if aperture.get("feature_trials"):
+        rows = [[t["feature"], "yes" if t["kept"] else "no", t["reason"]] for t in aperture["feature_trials"]]
+        parts.append("<h2>Lens features tried</h2><p>Each feature of a real lens that the discs asked for (a bright rim "
+                     "or centre, a cat-eye at the frame's edge, a squeeze), tried on the joint fit: kept where it gains "
+                     f"ΔBIC {FEATURE_DELTA_BIC:.0f}, and as much with any one disc left out. Coloured rims: kept where the "
+                     "discs' red and blue sizes differ from green's by more than chance.</p>"
+                     + _table(["feature", "kept", "why"], rows))
     if any(v is not None for v in data["metrics"].values()):
         metric_rows = [[name, _fmt(data["metrics"][name], 3), METRICS[name].better, METRICS[name].description] for name in METRICS]
         parts.append("<h2>Metrics: discs against the matched kernel (median)</h2>"
