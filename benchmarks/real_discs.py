@@ -21,7 +21,8 @@ runs ``compare`` in this process twice:
 and prints the whole-photo answer of each beside the label (the verdicts of
 ``benchmarks/real_photos.py``), so that a wrong answer is known to be the
 finder's or the fit's, with each lens feature the fit tried and why it was kept
-or not (``aperture.feature_trials``). Pooled figures close the table. It asserts nothing.
+or not, and those the discs did not ask for (``aperture.feature_trials``,
+``features_not_tried``). Pooled figures close the table. It asserts nothing.
 
 ``--finder-only`` runs the disc search alone (as ``compare`` runs it) and scores
 every disc it finds usable, as if the fit used them all: the recall is the same
@@ -50,6 +51,7 @@ from real_photos import MANIFEST, answer, find_photo, judge  # noqa: E402
 
 from bokehfit.compare import compare_photo  # noqa: E402
 from bokehfit.discs.labels import DiscLabels, DiscScore, read_labels, score_discs  # noqa: E402
+from bokehfit.words import feature_trial_lines  # noqa: E402
 
 
 def labels_for(entry: dict) -> tuple[Path, DiscLabels] | None:
@@ -98,10 +100,9 @@ def why_missed(comparison, score: DiscScore) -> Counter:
 
 def row(comparison, label: dict, seconds: float) -> dict:
     data = comparison.to_json("")
-    trials = (data.get("aperture") or {}).get("feature_trials") or []
     return {"answer": answer(data.get("aperture")), "status": comparison.status,
             "verdict": judge(label, data), "reason": comparison.reason, "seconds": round(seconds, 1),
-            "features_tried": [f"{t['feature']}, {t['reason']}" for t in trials]}
+            "features": feature_trial_lines(data.get("aperture") or {})}
 
 
 def labelled_photos(only: list[str] | None):
@@ -224,8 +225,8 @@ def main(argv=None) -> int:
               + ", ".join(f"{n} {what}" for what, n in score.used_as.most_common())
               + f"; junk {share}; size error {'-' if error is None else f'{error:.1%}'}")
         print(f"                 {own['answer']}  {own['status']} -> {own['verdict']}")
-        for tried in own["features_tried"]:
-            print(f"                 feature tried: {tried}")
+        for line in own["features"]:
+            print(f"                 {line}")
         for why, n in why_missed(comparison, score).most_common(6):
             print(f"                 missed {n} × {why}")
         for xy, size, what in score.junk_used[:6]:
@@ -242,8 +243,8 @@ def main(argv=None) -> int:
             measured[1] += len(labels.usable)
             print(f"  person's discs ({len(labels.usable)}, {mine['measured_usable']} measured usable): "
                   f"{mine['answer']}  {mine['status']} -> {mine['verdict']}  [{mine['seconds']:.1f} s]")
-            for tried in mine["features_tried"]:
-                print(f"                 feature tried: {tried}")
+            for line in mine["features"]:
+                print(f"                 {line}")
             result["person"] = mine
         rows.append(result)
     figures = pooled.to_json()

@@ -13,7 +13,7 @@ import pytest
 
 from bokehfit.discs import find_discs
 from bokehfit.fit import fit_aperture
-from bokehfit.fit.features import FEATURE_DELTA_BIC, FeatureTrial, gain_without_one_disc
+from bokehfit.fit.features import FEATURE_DELTA_BIC, RIM_SIGNAL, FeatureTrial, gain_without_one_disc
 
 
 def _joint(rss: list[float], parameters: int, pixels: int = 1000):
@@ -77,6 +77,7 @@ def test_one_ring_among_flat_discs_is_no_rim_of_the_lens():
     # The report names the disc that carries the gain, which the JSON and the summary give.
     trial = next(t for t in fit.feature_trials if t.feature == "rim")
     ring = next(d for d in discs if d.ring)
+    assert trial.asked == f"disc {ring.index} is a ring or has a bright centre", trial
     assert trial.gain >= FEATURE_DELTA_BIC and not trial.kept and trial.carried_by == ring.index, trial
     assert trial.reason.endswith(f"without disc {ring.index}: one disc's, not the lens's"), trial.reason
     assert trial.to_json() in fit.to_json()["feature_trials"]
@@ -109,3 +110,16 @@ def test_a_trial_says_why_the_feature_joined_the_model_or_did_not(values, kept, 
     trial = _trial(**values)
     assert trial.kept is kept and trial.reason.startswith(says), trial.reason
     assert trial.to_json()["kept"] is kept and trial.to_json()["reason"] == trial.reason
+
+
+def test_flat_discs_ask_for_no_rim_and_the_report_says_why():
+    """Four flat discs: the rim is not tried, and the fit says what the discs' profiles showed instead; every §3b
+    feature the joint fit may try is either tried or named with the reason it was not."""
+    fit = fit_aperture(_discs([False] * 4), find_discs(_discs([False] * 4)).discs, shapes=["circle"])
+    skipped = dict(fit.features_not_tried)
+    assert skipped["rim"].startswith("no disc is a ring or has a bright centre, and the flat model leaves the rims ")
+    assert skipped["rim"].endswith(f"(median of 4 discs; ±{100 * RIM_SIGNAL:g} % asks for a rim)"), skipped["rim"]
+    assert {t.feature for t in fit.feature_trials} | set(skipped) == {"rim", "vignetting", "squeeze"}, fit.message
+    assert all(skipped.values())
+    listed = fit.to_json()["features_not_tried"]
+    assert {"feature": "rim", "reason": skipped["rim"]} in listed

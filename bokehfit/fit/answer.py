@@ -205,6 +205,7 @@ def aperture_fit(*, focus_side: str, options: FitOptions, clock: Clock, chosen: 
         seen_aperture=seen_aperture,
         rejected={**chosen.set_aside, **consensus.rejected},
         feature_trials=joint.trials,
+        features_not_tried=joint.not_tried,
         feature_uncertainty=colours.uncertainty,
         notes=tuple(model.notes),
         chromatic_measure=colours.measure,

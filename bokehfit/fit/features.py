@@ -2,7 +2,7 @@
 
 The rim where discs show a profile, the vignetting where outer discs misfit the shape more than
 central ones, the squeeze where the discs are stretched alike along the frame's axes
-(:func:`features_to_test`). A feature joins the model where it lowers the joint BIC by at least
+(:func:`feature_asks`). A feature joins the model where it lowers the joint BIC by at least
 ``FEATURE_DELTA_BIC``, and by as much with any one disc left out (:func:`gain_without_one_disc`: the
 lens's, not one disc's), shows (a rim of at least ``MIN_RIM``) and does not sit at the end of its
 range (:func:`at_bound`). What each feature is (its parameters, start, bounds, least visible value)
@@ -28,7 +28,7 @@ from bokehfit.fit.pixels import JointFit, PixelFit
 from bokehfit.fit.vector import FIT_BOUNDS
 from bokehfit.fit.signature import Screen
 
-__all__ = ["add_feature", "at_bound", "feature_evidence", "FeatureTrial", "features_to_test", "gain_without_one_disc",
+__all__ = ["add_feature", "at_bound", "feature_asks", "feature_evidence", "FeatureTrial", "gain_without_one_disc",
            "FEATURE_DELTA_BIC", "MIN_RIM",
            "VIGNETTING_MIN_FIELD"]
 
@@ -117,16 +117,17 @@ class FeatureTrial:
     at_bound: bool  #: its fitted value sits at the end of its range (:func:`at_bound`)
     value: object  #: its fitted value in the trial (a number, or a mapping of the pair's members)
     carried_by: int | None = None  #: the index of the disc whose leaving out leaves the least gain (None: one disc)
+    asked: str = ""  #: why the discs asked for it (:func:`feature_asks`)
 
     @classmethod
     def of(cls, feature: str, before: JointFit, after: JointFit, noise: Sequence[float],
-           discs: Sequence[Disc]) -> FeatureTrial:
+           discs: Sequence[Disc], asked: str = "") -> FeatureTrial:
         """The trial of ``feature``: ``after``, the joint fit of ``discs`` with it on, against ``before``, without."""
         spec = FEATURE_SPECS[feature]
         gains = gains_without_each_disc(before, after, noise)
         least, carried_by = (float(gains.min()), discs[int(np.argmin(gains))].index) if len(gains) else (-math.inf, None)
         return cls(feature, before.bic - after.bic, least, spec.shows(after.aperture), at_bound(after.aperture, feature),
-                   spec.value(after.aperture), carried_by)
+                   spec.value(after.aperture), carried_by, asked)
 
     @property
     def kept(self) -> bool:
@@ -156,7 +157,7 @@ class FeatureTrial:
                  else round(float(self.value), 3))
         one_out = None if self.carried_by is None else {"least": round(self.least_gain, 2), "disc": self.carried_by}
         return {"feature": self.feature, "kept": self.kept, "delta_bic": round(self.gain, 2),
-                "delta_bic_one_disc_out": one_out, "value": value, "reason": self.reason}
+                "delta_bic_one_disc_out": one_out, "value": value, "reason": self.reason, "asked_because": self.asked}
 
 
 def _value_text(value) -> str:
@@ -201,47 +202,77 @@ def _rim_signal(crop: DiscCrop, fit: PixelFit) -> float | None:
 
 
 def _squeeze_signal(discs: list[Disc]) -> float | None:
-    """The squeeze the discs' outlines share (module constants), or None where they share none.
+    """The squeeze the discs' outlines share (module constants), or None where they share none."""
+    return _shared_squeeze(discs)[0]
+
+
+def _shared_squeeze(discs: list[Disc]) -> tuple[float | None, str]:
+    """The squeeze the discs' outlines share, or None, and why in words.
 
     A squeezed aperture scales x by 1/√s and y by √s after its rotation, so every disc's height
     over width, from its outline's second moments about the frame's axes, is s.
     """
     if len(discs) < MIN_ELONGATED_DISCS:
-        return None
+        return None, f"{len(discs)} discs fitted jointly ({MIN_ELONGATED_DISCS} needed to share a stretch)"
     squeezes = []
     for disc in discs:
         moments = cv2.moments(disc.outline_xy.astype(np.float32))
         mu20, mu02, mu11 = moments["mu20"], moments["mu02"], moments["mu11"]
         if mu20 <= 0 or mu02 <= 0:
-            return None
+            return None, f"disc {disc.index} has no outline to measure"
         axis = 0.5 * math.degrees(math.atan2(2.0 * mu11, mu20 - mu02))  # the long axis's, from x
         squeeze = math.sqrt(mu02 / mu20)
         off_axis = min(abs(axis), abs(abs(axis) - 90.0))
         if off_axis > SQUEEZE_AXIS_DEG and abs(math.log(squeeze)) > math.log(SQUEEZE_SIGNAL):
-            return None  # stretched askew: not the frame-aligned squeeze of an anamorphic lens
+            # stretched askew: not the frame-aligned squeeze of an anamorphic lens
+            return None, f"disc {disc.index} is stretched askew ({off_axis:.0f}° from the frame's axes)"
         squeezes.append(squeeze)
     logs = np.log(squeezes)
     middle = float(np.median(logs))
-    if abs(middle) < math.log(SQUEEZE_SIGNAL) or np.max(np.abs(logs - middle)) > SQUEEZE_AGREEMENT:
-        return None
-    return math.exp(middle)
+    if abs(middle) < math.log(SQUEEZE_SIGNAL):
+        return None, (f"the discs' median height over width is {math.exp(middle):.3f} "
+                      f"({SQUEEZE_SIGNAL:g} or {1 / SQUEEZE_SIGNAL:.3f} asks for a squeeze)")
+    if np.max(np.abs(logs - middle)) > SQUEEZE_AGREEMENT:
+        return None, (f"the discs are stretched differently (height over width {math.exp(logs.min()):.2f}–"
+                      f"{math.exp(logs.max()):.2f})")
+    return math.exp(middle), f"the discs share a height over width of {math.exp(middle):.3f}"
 
 
-def features_to_test(fits: list[PixelFit], discs: list[Disc], screens: list[Screen], crops: list[DiscCrop]) -> tuple[str, ...]:
-    """The §3b features worth testing on these discs: the rim where some disc is a ring (a bright rim)
-    or has a bright centre, or the flat model leaves the discs' rims brighter or darker than their centres (RIM_SIGNAL of the
-    contrast, median over the discs that show a profile); the vignetting where at least 3 discs were
-    fitted, some lie far enough from the centre to be cut (VIGNETTING_MIN_FIELD), and those misfit
-    the shape more than the central ones do (or none is central); the squeeze where the discs are
-    stretched alike along the frame's axes (:func:`_squeeze_signal`)."""
+def feature_asks(fits: list[PixelFit], discs: list[Disc], screens: list[Screen],
+                 crops: list[DiscCrop]) -> dict[str, tuple[bool, str]]:
+    """Each §3b feature the joint fit may try → whether these discs ask for it, and why or why not, in words: the rim
+    where some disc is a ring (a bright rim) or has a bright centre, or the flat model leaves the discs' rims brighter
+    or darker than their centres (RIM_SIGNAL of the contrast, median over the discs that show a profile); the
+    vignetting where at least 3 discs were fitted, some lie far enough from the centre to be cut (VIGNETTING_MIN_FIELD),
+    and those misfit the shape more than the central ones do (or none is central); the squeeze where the discs are
+    stretched alike along the frame's axes (:func:`_shared_squeeze`)."""
+    asks = {}
     signals = [v for v in (_rim_signal(c, f) for c, f in zip(crops, fits)) if v is not None]
-    profiled = bool(signals) and abs(float(np.median(signals))) >= RIM_SIGNAL
-    features = ["rim"] if profiled or any(d.profiled for d in discs) else []
+    ringed = [d.index for d in discs if d.profiled]
+    signal = float(np.median(signals)) if signals else None
+    if ringed:
+        asks["rim"] = True, f"disc {ringed[0]} is a ring or has a bright centre"
+    elif signal is not None and abs(signal) >= RIM_SIGNAL:
+        asks["rim"] = True, f"the flat model leaves the rims {100 * signal:+.1f} % of the contrast from the centres"
+    else:
+        shown = "no disc can show its profile (saturated, or too small)" if signal is None else (
+            f"the flat model leaves the rims {100 * signal:+.1f} % of the contrast from the centres "
+            f"(median of {len(signals)} discs; ±{100 * RIM_SIGNAL:g} % asks for a rim)")
+        asks["rim"] = False, f"no disc is a ring or has a bright centre, and {shown}"
     field = np.array([math.hypot(*f.field_position) for f in fits])
     rms = np.array([s.rms for s in screens])
     outer, inner = rms[field >= VIGNETTING_MIN_FIELD], rms[field < VIGNETTING_MIN_FIELD]
-    if len(discs) >= 3 and len(outer) and (not len(inner) or np.median(outer) > VIGNETTING_MISFIT_RATIO * np.median(inner)):
-        features.append("vignetting")
-    if _squeeze_signal(discs) is not None:
-        features.append("squeeze")
-    return tuple(features)
+    if len(discs) < 3:
+        asks["vignetting"] = False, f"{len(discs)} discs fitted jointly (3 needed)"
+    elif not len(outer):
+        asks["vignetting"] = False, (f"no disc lies {VIGNETTING_MIN_FIELD:g} of the half-diagonal or more from the "
+                                     "centre, where a barrel cuts")
+    elif len(inner) and not np.median(outer) > VIGNETTING_MISFIT_RATIO * np.median(inner):
+        ratio = float(np.median(outer) / max(float(np.median(inner)), 1e-12))
+        asks["vignetting"] = False, (f"the outer discs misfit the shape {ratio:.2f} times as much as the central ones "
+                                     f"({VIGNETTING_MISFIT_RATIO:g} asks for a cat-eye)")
+    else:
+        asks["vignetting"] = True, "the outer discs misfit the shape more than the central ones"
+    squeeze, why = _shared_squeeze(discs)
+    asks["squeeze"] = squeeze is not None, why
+    return asks

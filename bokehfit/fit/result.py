@@ -253,6 +253,8 @@ class ApertureFit:
     #: Each §3b feature tried on the joint fit: the BIC it gained, and why it joined the model or did not
     #: (:class:`bokehfit.fit.features.FeatureTrial`).
     feature_trials: tuple = ()
+    #: Each §3b feature the discs did not ask for, and why: (feature, reason) pairs.
+    features_not_tried: tuple = ()
     #: One standard deviation of each shared aperture parameter of the joint fit, by name.
     feature_uncertainty: dict = dataclasses.field(default_factory=dict)
     notes: tuple = ()  #: models set aside and why (an elongation the discs do not share)
@@ -341,6 +343,7 @@ class ApertureFit:
             candidates=[c.to_json() for c in self.candidates],
             feature_trials=[t.to_json() for t in self.feature_trials]
             + ([self.chromatic_measure.to_json()] if self.chromatic_measure is not None else []),
+            features_not_tried=[{"feature": feature, "reason": why} for feature, why in self.features_not_tried],
         )
         return data
 

@@ -31,7 +31,7 @@ from bokehfit.discs import Disc
 from bokehfit.fit.agreement import combine, consensus_start, disagreeing, outline_misfits, turned_discs, unsupported
 from bokehfit.fit.choice import choose_discs, slit_aspect
 from bokehfit.fit.families import FAMILIES, Family
-from bokehfit.fit.features import FeatureTrial, add_feature, features_to_test
+from bokehfit.fit.features import FeatureTrial, add_feature, feature_asks
 from bokehfit.fit.crop import DiscCrop, crop_disc
 from bokehfit.fit.pixels import JointFit, PixelFit, fit_discs
 from bokehfit.fit.result import CandidateModel, DiscFit, FitOptions
@@ -311,8 +311,9 @@ class Joint:
     discs: list[Disc]  #: the jointly fitted discs
     noise: list[float]  #: each jointly fitted disc's noise level (from its own fit)
     fit: JointFit
-    tests: tuple[str, ...] = ()  #: the features tried (:func:`~bokehfit.fit.features.features_to_test`)
+    tests: tuple[str, ...] = ()  #: the features tried (:func:`~bokehfit.fit.features.feature_asks`)
     trials: tuple[FeatureTrial, ...] = ()  #: each feature tried, what it gained and whether it was kept
+    not_tried: tuple[tuple[str, str], ...] = ()  #: each feature the discs did not ask for, and why
 
     @property
     def gains(self) -> dict[str, float]:
@@ -345,19 +346,22 @@ def fit_joint(chosen: Chosen, screened: Screened, consensus: Consensus, winner: 
 def try_features(joint: Joint, consensus: Consensus, winner: Family) -> Joint:
     """Stage 8: the §3b features the discs ask for, each tried on the joint fit and kept where it
     gains FEATURE_DELTA_BIC, with any one disc left out too (every disc's, not one disc's quirk), shows
-    (its record's least visible value: a rim of at least MIN_RIM) and is not at its bound."""
+    (its record's least visible value: a rim of at least MIN_RIM) and is not at its bound; those not asked
+    for are kept with the reason."""
     ids = joint.ids
-    tests = features_to_test([consensus.fits[i] for i in ids], joint.discs, [consensus.screens[i] for i in ids],
-                             joint.joint_crops)
+    asks = feature_asks([consensus.fits[i] for i in ids], joint.discs, [consensus.screens[i] for i in ids],
+                        joint.joint_crops)
+    tests = tuple(feature for feature, (asked, _) in asks.items() if asked)
     trials = []
     best = joint
     for feature in tests:
         start = add_feature(best.fit.aperture, feature, best.fit.fits, joint.discs)
         fit = fit_discs(joint.joint_crops, winner, start, noise=joint.noise, disc_starts=best.disc_starts())
-        trials.append(FeatureTrial.of(feature, best.fit, fit, joint.noise, joint.discs))
+        trials.append(FeatureTrial.of(feature, best.fit, fit, joint.noise, joint.discs, asks[feature][1]))
         if trials[-1].kept:
             best = dataclasses.replace(best, fit=fit)
-    return dataclasses.replace(best, tests=tests, trials=tuple(trials))
+    not_tried = tuple((feature, why) for feature, (asked, why) in asks.items() if not asked)
+    return dataclasses.replace(best, tests=tests, trials=tuple(trials), not_tried=not_tried)
 
 
 @dataclass(frozen=True)

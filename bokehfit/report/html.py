@@ -355,8 +355,9 @@ def build_html(comparison: Comparison, command_line: str) -> str:
                      "best; the words say how strongly the chosen model is preferred.</p>"
                      + _table(["model", "angle °", "ΔBIC", "evidence for the chosen", "outline misfit", "diameter px"],
                               _candidate_rows(table_candidates(aperture))))
-    if aperture.get("feature_trials"):
+    if aperture.get("feature_trials") or aperture.get("features_not_tried"):
         rows = [[t["feature"], "yes" if t["kept"] else "no", t["reason"]] for t in aperture["feature_trials"]]
+        rows += [[t["feature"], "not tried", t["reason"]] for t in aperture["features_not_tried"]]
         parts.append("<h2>Lens features tried</h2><p>Each feature of a real lens that the discs asked for (a bright rim "
                      "or centre, a cat-eye at the frame's edge, a squeeze), tried on the joint fit: kept where it gains "
                      f"ΔBIC {FEATURE_DELTA_BIC:.0f}, and as much with any one disc left out. Coloured rims: kept where the "
