@@ -80,6 +80,15 @@ def test_a_lens_without_colour_error_gets_no_chromatic_model():
     assert "|red| ≥ " in trial["reason"] and "% needed" in trial["reason"], trial
 
 
+def test_colours_of_too_few_discs_are_not_measured_and_the_report_says_why():
+    rgb = np.ascontiguousarray(disc_photo(0.04, -0.03)[:120, :240])  # two of the discs
+    fit = fit_aperture(luminance(rgb), find_discs(luminance(rgb)).discs, shapes=["circle"],
+                       rgb=lambda rows, cols: rgb[rows, cols])
+    assert fit.chromatic_measure is None and fit.aperture.chromatic is None
+    assert ("chromatic", "2 discs kept (3 needed)") in fit.features_not_tried, fit.features_not_tried
+    assert {"feature": "chromatic", "reason": "2 discs kept (3 needed)"} in fit.to_json()["features_not_tried"]
+
+
 def test_a_few_discs_that_agree_by_chance_are_not_significant():
     """Four discs whose red ratios spread by their own scatter: 4.8 standard errors from 0, past a normal 3σ but not
     past Student's t with 3 degrees of freedom (9.2); the same scatter over twelve discs is (t with 11: 3.85). Where

@@ -21,7 +21,7 @@ import numpy as np
 
 from bokehfit.apertures import Aperture
 from bokehfit.fit.agreement import combine, outline_misfits
-from bokehfit.fit.chromatic import ChromaticMeasure, measure_chromatic
+from bokehfit.fit.chromatic import MIN_DISCS, ChromaticMeasure, measure_chromatic
 from bokehfit.fit.pixels import JointFit, PixelFit, fit_discs
 from bokehfit.fit.result import ApertureFit, CandidateModel, DiscFit, FitOptions
 from bokehfit.fit.stages import JOINT_DISCS, Chosen, Clock, Consensus, Joint, Model, Selection
@@ -133,6 +133,7 @@ class Colours:
     seen_aperture: Aperture
     uncertainty: dict  #: one standard deviation of each shared aperture parameter, by name
     measure: ChromaticMeasure | None  #: what the discs' colours said (None: fewer than three measured, or no colour)
+    not_measured: str | None = None  #: why the colours were not measured, where the photo's were given
 
 
 def measure_colours(rgb: Callable[[slice, slice], np.ndarray] | None, chosen: Chosen, consensus: Consensus,
@@ -145,7 +146,12 @@ def measure_colours(rgb: Callable[[slice, slice], np.ndarray] | None, chosen: Ch
     if colours is not None and colours.significant:
         seen_aperture = seen_aperture.replace(chromatic=colours.chromatic)
         uncertainty.update(chromatic_red=colours.uncertainty.red, chromatic_blue=colours.uncertainty.blue)
-    return Colours(seen_aperture, uncertainty, colours)
+    why, kept = None, len(consensus.kept)
+    if rgb is not None and colours is None:
+        why = (f"{kept} discs kept ({MIN_DISCS} needed)" if kept < MIN_DISCS else
+               f"fewer than {MIN_DISCS} of the {kept} discs kept are clean plateaus outlined in all three colours "
+               "(saturated, ringed and partly seen discs are not measured)")
+    return Colours(seen_aperture, uncertainty, colours, why)
 
 
 def _angle_uncertainty(winner: CandidateModel, fit: JointFit) -> float | None:
@@ -205,7 +211,7 @@ def aperture_fit(*, focus_side: str, options: FitOptions, clock: Clock, chosen: 
         seen_aperture=seen_aperture,
         rejected={**chosen.set_aside, **consensus.rejected},
         feature_trials=joint.trials,
-        features_not_tried=joint.not_tried,
+        features_not_tried=joint.not_tried + ((("chromatic", colours.not_measured),) if colours.not_measured else ()),
         feature_uncertainty=colours.uncertainty,
         notes=tuple(model.notes),
         chromatic_measure=colours.measure,
