@@ -119,9 +119,12 @@ def table_candidates(aperture: dict) -> list[dict]:
 
 
 def feature_trial_lines(aperture: dict) -> list[str]:
-    """The summary's lines on the lens's features (the JSON's ``feature_trials``): each one tried, what it
-    gained and why it joined the model or did not; then each the discs did not ask for, and why."""
-    return ([f"feature tried: {trial['feature']}, {trial['reason']}" for trial in aperture.get("feature_trials") or []]
+    """The summary's lines on the lens's features (the JSON's ``feature_trials``): each one tried, what the discs
+    showed that asked for it, what it gained and why it joined the model or did not; then each the discs did not
+    ask for, and what they showed instead."""
+    return ([f"feature tried: {trial['feature']}"
+             + (f" ({trial['asked_because']})" if trial.get("asked_because") else "") + f", {trial['reason']}"
+             for trial in aperture.get("feature_trials") or []]
             + [f"feature not tried: {skipped['feature']}: {skipped['reason']}"
                for skipped in aperture.get("features_not_tried") or []])
 

@@ -160,7 +160,7 @@ def test_an_unsure_verdict_does_not_headline_unsupported_features(circle):
     assert "chromatic" not in close.verdict
     # The summary names it only as a feature tried and not kept (the discs' colours measured within chance).
     mentions = [line for line in close.summary().splitlines() if "chromatic" in line]
-    assert all(line.startswith("feature tried: chromatic, not kept: ") for line in mentions), mentions
+    assert all(line.startswith("feature tried: chromatic (") and "), not kept: " in line for line in mentions), mentions
 
 
 def test_one_runner_up_everywhere(circle):
@@ -286,12 +286,14 @@ def test_each_lens_feature_tried_says_why_it_was_kept_or_not(circle):
     from bokehfit.fit.features import FeatureTrial
 
     used = next(d["index"] for d in circle.to_json("")["discs"] if d["used"])
-    rim = FeatureTrial("rim", 122.0, -113.0, True, False, 0.23, used)
+    rim = FeatureTrial("rim", 122.0, -113.0, True, False, 0.23, used, "disc 3 is a ring or has a bright centre")
     colours = ChromaticMeasure(Chromatic(-0.086, -0.138), Chromatic(0.026, 0.038), 6, False, Chromatic(0.15, 0.2))
     skipped = ("squeeze", "2 discs fitted jointly (3 needed to share a stretch)")
     tried = variant(circle, feature_trials=(rim,), chromatic_measure=colours, features_not_tried=(skipped,))
-    rim_says = f"rim, not kept: ΔBIC 122, but -113 without disc {used}: one disc's, not the lens's"
-    colours_says = "chromatic, not kept: red -8.6 % ± 2.6, blue -13.8 % ± 3.8 from 6 discs, within what 6 discs can"
+    rim_says = (f"rim (disc 3 is a ring or has a bright centre), not kept: ΔBIC 122, but -113 without disc {used}: "
+                "one disc's, not the lens's")
+    colours_says = ("chromatic (6 clean discs measured in red, green and blue), not kept: red -8.6 % ± 2.6, blue -13.8 % "
+                    "± 3.8 from 6 discs, within what 6 discs can")
     summary = tried.summary()
     assert f"feature tried: {rim_says}" in summary and f"feature tried: {colours_says}" in summary, summary
     assert "feature not tried: squeeze: 2 discs fitted jointly (3 needed to share a stretch)" in summary, summary
@@ -299,7 +301,8 @@ def test_each_lens_feature_tried_says_why_it_was_kept_or_not(circle):
     assert [t["feature"] for t in trials] == ["rim", "chromatic"] and not any(t["kept"] for t in trials), trials
     assert trials[0]["delta_bic_one_disc_out"] == {"least": -113.0, "disc": used}, trials
     page = page_text(tried)
-    assert "Lens features tried" in page and rim_says.split(", ", 1)[1] in page, page
-    assert "squeeze not tried 2 discs fitted jointly" in " ".join(page.split()), page
+    assert "Lens features tried" in page and rim_says.split("), ", 1)[1] in page, page
+    assert "squeeze 2 discs fitted jointly (3 needed to share a stretch) not tried" in " ".join(page.split()), page
+    assert "chromatic 6 clean discs measured in red, green and blue no not kept: red -8.6 %" in " ".join(page.split())
     bare = variant(circle, feature_trials=(), chromatic_measure=None, features_not_tried=())
     assert "Lens features tried" not in page_text(bare)

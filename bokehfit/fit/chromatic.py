@@ -105,7 +105,7 @@ class ChromaticMeasure:
         return {"feature": "chromatic", "kept": self.significant, "discs": self.discs,
                 "value": {"red": round(self.chromatic.red, 4), "blue": round(self.chromatic.blue, 4)},
                 "uncertainty": {"red": round(self.uncertainty.red, 4), "blue": round(self.uncertainty.blue, 4)},
-                "reason": self.reason}
+                "reason": self.reason, "asked_because": f"{self.discs} clean discs measured in red, green and blue"}
 
 
 def measure_chromatic(rgb: Callable[[slice, slice], np.ndarray], discs: Sequence[Disc],

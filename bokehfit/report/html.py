@@ -356,13 +356,14 @@ def build_html(comparison: Comparison, command_line: str) -> str:
                      + _table(["model", "angle °", "ΔBIC", "evidence for the chosen", "outline misfit", "diameter px"],
                               _candidate_rows(table_candidates(aperture))))
     if aperture.get("feature_trials") or aperture.get("features_not_tried"):
-        rows = [[t["feature"], "yes" if t["kept"] else "no", t["reason"]] for t in aperture["feature_trials"]]
-        rows += [[t["feature"], "not tried", t["reason"]] for t in aperture["features_not_tried"]]
+        rows = [[t["feature"], t.get("asked_because") or "", "yes" if t["kept"] else "no", t["reason"]]
+                for t in aperture["feature_trials"]]
+        rows += [[t["feature"], t["reason"], "not tried", ""] for t in aperture["features_not_tried"]]
         parts.append("<h2>Lens features tried</h2><p>Each feature of a real lens that the discs asked for (a bright rim "
                      "or centre, a cat-eye at the frame's edge, a squeeze), tried on the joint fit: kept where it gains "
                      f"ΔBIC {FEATURE_DELTA_BIC:.0f}, and as much with any one disc left out. Coloured rims: kept where the "
                      "discs' red and blue sizes differ from green's by more than chance.</p>"
-                     + _table(["feature", "kept", "why"], rows))
+                     + _table(["feature", "what the discs show", "kept", "why"], rows))
     if any(v is not None for v in data["metrics"].values()):
         metric_rows = [[name, _fmt(data["metrics"][name], 3), METRICS[name].better, METRICS[name].description] for name in METRICS]
         parts.append("<h2>Metrics: discs against the matched kernel (median)</h2>"
