@@ -29,6 +29,7 @@ __all__ = [
     "angle_note",
     "article",
     "clip_headline",
+    "counted",
     "describe",
     "diameter_text",
     "disc_problems",
@@ -116,6 +117,11 @@ def table_candidates(aperture: dict) -> list[dict]:
     first = [c for c in candidates if c.get("role") == "runner_up"]
     rest = sorted((c for c in candidates[1:] if c.get("role") != "runner_up"), key=lambda c: c["delta_bic"])
     return [candidates[0], *first, *rest]
+
+
+def counted(count: int, noun: str) -> str:
+    """``count`` and the noun, plural but for one: "1 disc", "2 discs"."""
+    return f"{count} {noun}" + ("" if count == 1 else "s")
 
 
 def feature_trial_lines(aperture: dict) -> list[str]:

@@ -25,6 +25,7 @@ from bokehfit.fit.chromatic import MIN_DISCS, ChromaticMeasure, measure_chromati
 from bokehfit.fit.pixels import JointFit, PixelFit, fit_discs
 from bokehfit.fit.result import ApertureFit, CandidateModel, DiscFit, FitOptions
 from bokehfit.fit.stages import JOINT_DISCS, Chosen, Clock, Consensus, Joint, Model, Selection
+from bokehfit.words import counted
 
 __all__ = ["Colours", "Margin", "Refit", "Size", "aperture_fit", "judge_margin", "measure_colours", "measure_size",
            "rank_candidates", "refit_rest"]
@@ -148,7 +149,7 @@ def measure_colours(rgb: Callable[[slice, slice], np.ndarray] | None, chosen: Ch
         uncertainty.update(chromatic_red=colours.uncertainty.red, chromatic_blue=colours.uncertainty.blue)
     why, kept = None, len(consensus.kept)
     if rgb is not None and colours is None:
-        why = (f"{kept} discs kept ({MIN_DISCS} needed)" if kept < MIN_DISCS else
+        why = (f"{counted(kept, 'disc')} kept ({MIN_DISCS} needed)" if kept < MIN_DISCS else
                f"fewer than {MIN_DISCS} of the {kept} discs kept are clean plateaus outlined in all three colours "
                "(saturated, ringed and partly seen discs are not measured)")
     return Colours(seen_aperture, uncertainty, colours, why)

@@ -27,6 +27,7 @@ from bokehfit.fit.disc_model import render_disc_model
 from bokehfit.fit.pixels import JointFit, PixelFit
 from bokehfit.fit.vector import FIT_BOUNDS
 from bokehfit.fit.signature import Screen
+from bokehfit.words import counted
 
 __all__ = ["add_feature", "at_bound", "feature_asks", "feature_evidence", "FeatureTrial", "gain_without_one_disc",
            "FEATURE_DELTA_BIC", "MIN_RIM",
@@ -213,7 +214,7 @@ def _shared_squeeze(discs: list[Disc]) -> tuple[float | None, str]:
     over width, from its outline's second moments about the frame's axes, is s.
     """
     if len(discs) < MIN_ELONGATED_DISCS:
-        return None, f"{len(discs)} discs fitted jointly ({MIN_ELONGATED_DISCS} needed to share a stretch)"
+        return None, f"{counted(len(discs), 'disc')} fitted jointly ({MIN_ELONGATED_DISCS} needed to share a stretch)"
     squeezes = []
     for disc in discs:
         moments = cv2.moments(disc.outline_xy.astype(np.float32))
@@ -257,13 +258,13 @@ def feature_asks(fits: list[PixelFit], discs: list[Disc], screens: list[Screen],
     else:
         shown = "no disc can show its profile (saturated, or too small)" if signal is None else (
             f"the flat model leaves the rims {100 * signal:+.1f} % of the contrast from the centres "
-            f"(median of {len(signals)} discs; ±{100 * RIM_SIGNAL:g} % asks for a rim)")
+            f"(median of {counted(len(signals), 'disc')}; ±{100 * RIM_SIGNAL:g} % asks for a rim)")
         asks["rim"] = False, f"no disc is a ring or has a bright centre, and {shown}"
     field = np.array([math.hypot(*f.field_position) for f in fits])
     rms = np.array([s.rms for s in screens])
     outer, inner = rms[field >= VIGNETTING_MIN_FIELD], rms[field < VIGNETTING_MIN_FIELD]
     if len(discs) < 3:
-        asks["vignetting"] = False, f"{len(discs)} discs fitted jointly (3 needed)"
+        asks["vignetting"] = False, f"{counted(len(discs), 'disc')} fitted jointly (3 needed)"
     elif not len(outer):
         asks["vignetting"] = False, (f"no disc lies {VIGNETTING_MIN_FIELD:g} of the half-diagonal or more from the "
                                      "centre, where a barrel cuts")
