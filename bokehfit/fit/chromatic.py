@@ -84,7 +84,7 @@ class ChromaticMeasure:
     discs: int  #: discs measured in all three channels
     significant: bool  #: the module's criteria are met: the photo shows chromatic aberration
     #: The least distance of each from 0 that the discs make significant (:func:`median_and_bar`; MIN_CHROMATIC aside).
-    bar: Chromatic | None = None
+    bar: Chromatic
 
     def describe(self) -> str:
         return (f"red {100 * self.chromatic.red:+.1f} % ± {100 * self.uncertainty.red:.1f}, blue "
@@ -95,10 +95,9 @@ class ChromaticMeasure:
         """Why the aperture has the chromatic aberration measured, or has none, in words."""
         if self.significant:
             return f"kept: {self.describe()}"
-        least = "" if self.bar is None else (
-            f" (|red| ≥ {100 * max(self.bar.red, MIN_CHROMATIC):.1f} % or |blue| ≥ "
-            f"{100 * max(self.bar.blue, MIN_CHROMATIC):.1f} % needed)")
-        return f"not kept: {self.describe()}, within what {self.discs} discs can differ by chance{least}"
+        return (f"not kept: {self.describe()}, within what {self.discs} discs can differ by chance (|red| ≥ "
+                f"{100 * max(self.bar.red, MIN_CHROMATIC):.1f} % or |blue| ≥ {100 * max(self.bar.blue, MIN_CHROMATIC):.1f} %"
+                " needed)")
 
     def to_json(self) -> dict:
         """The measure as a trial of the ``chromatic`` feature (beside :class:`bokehfit.fit.features.FeatureTrial`'s)."""

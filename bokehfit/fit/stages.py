@@ -311,9 +311,13 @@ class Joint:
     discs: list[Disc]  #: the jointly fitted discs
     noise: list[float]  #: each jointly fitted disc's noise level (from its own fit)
     fit: JointFit
-    tests: tuple[str, ...] = ()  #: the features tried (:func:`~bokehfit.fit.features.feature_asks`)
     trials: tuple[FeatureTrial, ...] = ()  #: each feature tried, what it gained and whether it was kept
     not_tried: tuple[tuple[str, str], ...] = ()  #: each feature the discs did not ask for, and why
+
+    @property
+    def tests(self) -> tuple[str, ...]:
+        """The features tried (those the discs asked for: :func:`~bokehfit.fit.features.feature_asks`)."""
+        return tuple(trial.feature for trial in self.trials)
 
     @property
     def gains(self) -> dict[str, float]:
@@ -351,17 +355,16 @@ def try_features(joint: Joint, consensus: Consensus, winner: Family) -> Joint:
     ids = joint.ids
     asks = feature_asks([consensus.fits[i] for i in ids], joint.discs, [consensus.screens[i] for i in ids],
                         joint.joint_crops)
-    tests = tuple(feature for feature, (asked, _) in asks.items() if asked)
     trials = []
     best = joint
-    for feature in tests:
+    for feature in (feature for feature, (asked, _) in asks.items() if asked):
         start = add_feature(best.fit.aperture, feature, best.fit.fits, joint.discs)
         fit = fit_discs(joint.joint_crops, winner, start, noise=joint.noise, disc_starts=best.disc_starts())
         trials.append(FeatureTrial.of(feature, best.fit, fit, joint.noise, joint.discs, asks[feature][1]))
         if trials[-1].kept:
             best = dataclasses.replace(best, fit=fit)
     not_tried = tuple((feature, why) for feature, (asked, why) in asks.items() if not asked)
-    return dataclasses.replace(best, tests=tests, trials=tuple(trials), not_tried=not_tried)
+    return dataclasses.replace(best, trials=tuple(trials), not_tried=not_tried)
 
 
 @dataclass(frozen=True)

@@ -357,8 +357,8 @@ def build_html(comparison: Comparison, command_line: str) -> str:
                               _candidate_rows(table_candidates(aperture))))
     if aperture.get("feature_trials") or aperture.get("features_not_tried"):
         rows = [[t["feature"], t.get("asked_because") or "", "yes" if t["kept"] else "no", t["reason"]]
-                for t in aperture["feature_trials"]]
-        rows += [[t["feature"], t["reason"], "not tried", ""] for t in aperture["features_not_tried"]]
+                for t in aperture.get("feature_trials") or []]
+        rows += [[t["feature"], t["reason"], "not tried", ""] for t in aperture.get("features_not_tried") or []]
         parts.append("<h2>Lens features tried</h2><p>Each feature of a real lens that the discs asked for (a bright rim "
                      "or centre, a cat-eye at the frame's edge, a squeeze), tried on the joint fit: kept where it gains "
                      f"ΔBIC {FEATURE_DELTA_BIC:.0f}, and as much with any one disc left out. Coloured rims: kept where the "
