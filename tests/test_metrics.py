@@ -348,6 +348,36 @@ def test_efd_kuhl_giardina_normal_form():
     assert min(np.abs(a - b).max(), np.abs(a - flip * b).max()) < 1e-9
 
 
+@pytest.mark.parametrize("pair", [("blob", "hexagon"), ("blob8", "blob"), ("pentagon", "hexagon"), ("star", "slit")])
+def test_efd_aligned_distance_is_the_least_over_start_point_and_rotation(pair):
+    """The distance after the residual start point τ and rotation ψ are resolved is the least over
+    them: against a brute-force search (τ on a grid of 20,000, each τ's best ψ by 2-D Procrustes on
+    the coefficient matrices), never above it and above it by no more than the grid's step allows."""
+    from bokehfit.metrics.efd import efd_aligned_distance
+
+    def shape(name):
+        return blob(8) if name == "blob8" else blob() if name == "blob" else outline(name, 11.0)
+
+    harmonics = 12
+    a, b = (normalise_efd(efd_coefficients(normalise(shape(name)), harmonics)) for name in pair)
+    distance, _, _ = efd_aligned_distance(a, b)
+    n = np.arange(1, harmonics + 1)
+    target = np.concatenate([a[:, :2], a[:, 2:]], axis=1).reshape(harmonics, 2, 2)  # [[a, b], [c, d]] per harmonic
+    moving = np.concatenate([b[:, :2], b[:, 2:]], axis=1).reshape(harmonics, 2, 2)
+    best = math.inf
+    for tau in np.linspace(0.0, 2.0 * np.pi, 20_000, endpoint=False):
+        c, s = np.cos(n * tau), np.sin(n * tau)
+        started = np.einsum("nij,njk->nik", moving, np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2))
+        columns_a = target.transpose(1, 0, 2).reshape(2, -1)
+        columns_b = started.transpose(1, 0, 2).reshape(2, -1)
+        psi = math.atan2(float(np.sum(columns_b[0] * columns_a[1] - columns_b[1] * columns_a[0])),
+                         float(np.sum(columns_b[0] * columns_a[0] + columns_b[1] * columns_a[1])))
+        turned = np.array([[math.cos(psi), -math.sin(psi)], [math.sin(psi), math.cos(psi)]]) @ columns_b
+        best = min(best, float(np.linalg.norm(columns_a - turned)))
+    assert distance <= best + 1e-12
+    assert distance >= best - 5e-3
+
+
 def test_efd_not_mirror_invariant():
     shape = blob()
     assert efd_distance(shape, shape * [-1.0, 1.0]) > 0.05
@@ -501,6 +531,35 @@ def test_distance_to_an_outline_against_its_near_sides_is_the_distance_against_a
     assert len(target) > DistanceToOutline.ALL_SIDES_UP_TO  # the pruned path is the one tested
     every_side = distance_to.to_sides(points[:, 0, None], points[:, 1, None]).min(axis=1)
     np.testing.assert_array_equal(distance_to(points), every_side)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_narrow_alignment_finds_the_best_iou_within_its_reach(seed):
+    """compare's alignment within ±ALIGNMENT_SEARCH_DEG (searched on simplified outlines) turns a noisy
+    disc to the IoU's maximum there: the full outlines' exact IoU at its angle is the best on a grid of
+    0.1° refined to 0.002° around the grid's best, to 1e-5."""
+    from bokehfit.compare import ALIGNMENT_SEARCH_DEG, METRIC_POINTS, _half_outline
+    from bokehfit.kernels.exact import coverage
+    from bokehfit.metrics import _iou_of_normalised, _local_rotation
+    from bokehfit.metrics.outlines import resample
+
+    hexagon = make_aperture("hexagon", 20.0)
+    diameter = 33.0
+    drawn = _half_outline(coverage(hexagon, diameter * math.sqrt(math.pi) / 2.0, 45), diameter)
+    kernel = normalise(drawn)
+    rng = np.random.default_rng(seed)
+    turned = rotate(resample(drawn - centroid(drawn), 400), rng.uniform(-6.0, 6.0))  # px, about its centre
+    disc = normalise(resample(turned + rng.normal(0.0, 0.25, (400, 2)), METRIC_POINTS))
+    angle = _local_rotation(kernel, disc, ALIGNMENT_SEARCH_DEG)
+
+    def overlap(angle_deg):
+        return _iou_of_normalised(kernel, rotate(disc, angle_deg))
+
+    grid = np.arange(-ALIGNMENT_SEARCH_DEG, ALIGNMENT_SEARCH_DEG + 1e-9, 0.1)
+    coarse = grid[int(np.argmax([overlap(g) for g in grid]))]
+    fine = max(overlap(g) for g in np.arange(coarse - 0.1, coarse + 0.1 + 1e-9, 0.002))
+    assert abs(angle) <= ALIGNMENT_SEARCH_DEG
+    assert overlap(angle) >= fine - 1e-5
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])

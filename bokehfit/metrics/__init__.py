@@ -182,11 +182,17 @@ def _simplify(outline: np.ndarray) -> np.ndarray:
 
 
 def _local_rotation(a: np.ndarray, b: np.ndarray, within_deg: float) -> float:
-    """Best rotation of ``b`` searched only within ±``within_deg`` of none; both normalised."""
+    """Best rotation of ``b`` searched only within ±``within_deg`` of none; both normalised.
+
+    The exact IoU of the outlines simplified to ``COARSE_SIMPLIFY`` is searched: their sides lie
+    within that of the outlines', so the IoU it maximises differs from theirs by about the
+    simplification (3e-4 of the unit area) and its maximum's angle less; it costs a third."""
     from scipy.optimize import minimize_scalar  # on first use: scipy.optimize takes ~0.3 s to import
 
+    simple_a, simple_b = _simplify(a), _simplify(b)
+    areas = (signed_area(simple_a), signed_area(simple_b))
     result = minimize_scalar(
-        lambda angle: -_iou_of_normalised(a, rotate(b, angle)),
+        lambda angle: -_iou_of_normalised(simple_a, rotate(simple_b, angle), areas=areas),
         bounds=(-within_deg, within_deg),
         method="bounded",
         options={"xatol": REFINE_TOL_DEG},

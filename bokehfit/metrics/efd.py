@@ -129,10 +129,6 @@ def efd_aligned_distance(normal_a: np.ndarray, normal_b: np.ndarray) -> tuple[fl
     n = np.arange(1, len(normal_a) + 1)
     cross_plus, cross_minus = np.conj(pa) * pb, np.conj(ma) * mb
 
-    def correlation(tau):
-        tau = np.atleast_1d(tau)[:, None]
-        return np.abs(np.sum(cross_plus * np.exp(1j * n * tau) + cross_minus * np.exp(-1j * n * tau), axis=1))
-
     def pose(tau):
         s = np.sum(cross_plus * np.exp(1j * n * tau) + cross_minus * np.exp(-1j * n * tau))
         psi = -float(np.angle(s))
@@ -141,8 +137,11 @@ def efd_aligned_distance(normal_a: np.ndarray, normal_b: np.ndarray) -> tuple[fl
         return float(np.linalg.norm(normal_a - moved)), psi
 
     size = _SHIFT_GRID_PER_HARMONIC * len(n)  # even: the grid holds τ = 0 and π
-    grid = 2.0 * np.pi * np.arange(size) / size
-    best = float(grid[np.argmax(correlation(grid))])
+    # S on the grid τ_k = 2πk/size is a discrete Fourier sum: P_n at frequency n, M_n at −n.
+    spectrum = np.zeros(size, dtype=np.complex128)
+    spectrum[n] = cross_plus
+    spectrum[-n] = cross_minus
+    best = 2.0 * np.pi * float(np.argmax(np.abs(np.fft.ifft(spectrum)))) / size
     step = 2.0 * np.pi / size
     # The distance itself, not |S|, is refined: near a match it has a sharp
     # minimum (∝ |τ − τ*|) where |S| is flat (∝ (τ − τ*)²), so τ comes out

@@ -317,6 +317,9 @@ class DistanceToOutline:
     PAIRS_PER_CHUNK = 2**18
     #: Outlines of at most this many sides are measured against every side (the search costs more).
     ALL_SIDES_UP_TO = 64
+    #: Sides (the nearest by their midpoints) each point is first measured against: where every side
+    #: that can be its nearest is among them, as on a densely sampled outline, no further search is made.
+    NEAREST_SIDES = 6
 
     def __init__(self, outline: np.ndarray):
         self.start = np.asarray(outline, dtype=np.float64)
@@ -344,9 +347,21 @@ class DistanceToOutline:
 
             self._middles = (cKDTree(self.start + 0.5 * self.side), 0.5 * math.sqrt(float(self.length_sq.max())))
         tree, longest_half = self._middles
-        nearest_middle, _ = tree.query(points)
         # The nearest midpoint is on its side: the nearest side lies within it plus the longest half-side.
-        near = tree.query_ball_point(points, nearest_middle * (1.0 + 1e-12) + longest_half + 1e-12, return_sorted=False)
+        # The few nearest midpoints mostly hold every side that close: measured against those at once.
+        nearest = min(self.NEAREST_SIDES, len(self.start))
+        found, sides = tree.query(points, k=nearest)
+        reach = found[:, 0] * (1.0 + 1e-12) + longest_half + 1e-12
+        result = self.to_sides(points[:, 0, None], points[:, 1, None], sides).min(axis=1)
+        farther = np.flatnonzero(found[:, -1] <= reach)  # sides within reach may lie beyond the few
+        if len(farther):
+            result[farther] = self._within(points[farther], reach[farther])
+        return result
+
+    def _within(self, points: np.ndarray, reach: np.ndarray) -> np.ndarray:
+        """Distances from the points to the sides whose midpoints lie within ``reach`` of each."""
+        tree, _ = self._middles
+        near = tree.query_ball_point(points, reach, return_sorted=False)
         counts = np.fromiter((len(sides) for sides in near), dtype=np.intp, count=len(points))
         if counts.sum() >= len(points) * len(self.start) // 2:  # the outline's sides are too long to prune
             return self._to_all_sides(points)
