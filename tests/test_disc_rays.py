@@ -213,6 +213,39 @@ def test_the_search_measures_a_bright_centre_blob_by_its_step(radius, seed, monk
     assert math.hypot(usable[0].center_xy[0] - centre[0], usable[0].center_xy[1] - centre[1]) < 1.0
 
 
+def test_the_rays_crossings_are_each_rays_own():
+    """Where each ray falls through its level, taken for many rays at once, is what one ray's own
+    search gives: of the falls within the step's sides of its index, the nearest (the first of two as
+    near), linearly interpolated; none where the ray does not fall there; in float64, or in the
+    profile's float32 where the levels are float32 (as a Python float level with the float32 profile)."""
+    from bokehfit.discs.rays import BAND_REL, _Rays
+
+    def one_ray(rays, k, j, level):
+        lo = max(0, j - rays.gap - rays.side // 2)
+        hi = min(len(rays.radii) - 1, j + rays.gap + rays.side // 2)
+        p = rays.profile[k, lo : hi + 1]
+        above = p >= level
+        falls = np.nonzero(above[:-1] & ~above[1:])[0]
+        if not len(falls):
+            return None
+        c = falls[np.argmin(np.abs(falls + lo - j))]
+        t = (p[c] - level) / max(float(p[c] - p[c + 1]), 1e-12)
+        return float(rays.radii[lo + c] + t * rays.step)
+
+    rng = np.random.default_rng(6)
+    crop = np.round(rng.random((90, 130)), 2).astype(np.float32)  # ties between falls as near
+    rays = _Rays(crop, (45.0, 64.0), 30.0, 0.01, BAND_REL[1] * 30.0)
+    ks = np.arange(rays.count)
+    at = rng.integers(0, len(rays.radii), rays.count)
+    levels = rng.uniform(0.2, 0.8, rays.count)
+    for kind, as_given in ((np.float64, lambda v: np.float64(v)), (np.float32, float)):
+        got = rays.crossings(ks, at, levels.astype(kind))
+        expected = [one_ray(rays, k, int(j), as_given(v)) for k, j, v in zip(ks, at, levels)]
+        assert any(e is None for e in expected) and any(e is not None for e in expected)
+        for value, wanted in zip(got, expected):
+            assert (math.isnan(value) and wanted is None) or value == wanted, (value, wanted)
+
+
 def test_the_rays_levels_are_each_rays_own_medians():
     """The light inside, outside and beyond a step and whether its sides are in the frame, taken for many rays
     at once, are each ray's own medians over its own samples (a crop cut by the frame, steps anywhere, some

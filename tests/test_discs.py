@@ -375,6 +375,22 @@ def test_fast_median_and_percentile_are_numpys():
             assert got == expected and got.dtype == expected.dtype, (values, q, got, expected)
 
 
+def test_row_medians_are_each_windows_median():
+    """The medians of many windows of a table at once are each window's :func:`_median`, in its type
+    (windows of one sample to a whole row, odd and even counts, ties)."""
+    from bokehfit.discs.levels import _median, _row_medians
+
+    rng = np.random.default_rng(12)
+    for kind in (np.float32, np.float64):
+        table = np.round(rng.normal(size=(30, 50)), 1).astype(kind)
+        rows = rng.integers(0, 30, 400)
+        starts = rng.integers(0, 50, 400)
+        stops = np.minimum(50, starts + rng.integers(1, 51, 400))
+        got = _row_medians(table, rows, starts, stops)
+        expected = [_median(table[r, a:b]) for r, a, b in zip(rows, starts, stops)]
+        assert got.dtype == kind and list(got) == expected
+
+
 def test_hole_filling_is_scipys():
     from scipy import ndimage
 

@@ -99,6 +99,23 @@ def _median(values: np.ndarray):
     return (part[half - 1] + part[half]) / 2
 
 
+def _row_medians(values: np.ndarray, rows: np.ndarray, starts: np.ndarray, stops: np.ndarray) -> np.ndarray:
+    """:func:`_median` of ``values[rows[i], starts[i]:stops[i]]`` for every i at once (each slice
+    non-empty and in the row), the same numbers in the array's type: each window sorted, padded
+    beyond its end with +inf, and its middle one or two taken."""
+    rows, starts, stops = (np.asarray(v, np.int64) for v in (rows, starts, stops))
+    counts = stops - starts
+    if len(counts) == 0:
+        return np.empty(0, values.dtype)
+    at = starts[:, None] + np.arange(int(counts.max()))
+    window = values[rows[:, None], np.minimum(at, values.shape[1] - 1)]
+    window = np.sort(np.where(at < stops[:, None], window, np.inf).astype(values.dtype, copy=False), axis=1)
+    half, each = counts // 2, np.arange(len(counts))
+    upper = window[each, half]
+    lower = window[each, np.maximum(half - 1, 0)]
+    return np.where(counts % 2 == 1, upper, (lower + upper) / 2)
+
+
 def _percentile(values: np.ndarray, q: float):
     """``np.percentile(values, q)`` (its default, linear method) of a 1-D array without NaN,
     the same number in the array's type."""

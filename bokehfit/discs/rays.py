@@ -48,7 +48,7 @@ import numpy as np
 from scipy import ndimage
 
 from bokehfit.discs.contours import polygon_area_centroid
-from bokehfit.discs.levels import Levels, Window, _median
+from bokehfit.discs.levels import Levels, Window, _median, _row_medians
 from bokehfit.discs.outlines import Outlined
 from bokehfit.discs.reasons import NoDisc, Reason
 from bokehfit.discs.verdict import Measurement, describe
@@ -191,24 +191,33 @@ class _Rays:
         pixels = self.side * self.step * np.maximum(self.radii[at] * 2.0 * math.pi / self.count, 1.0)
         return self.noise * np.sqrt(2.0 / np.maximum(pixels, 1.0))
 
-    def plateau(self, k: int, j: int) -> float:
-        """The light of ray ``k`` inside radial index ``j``, from PLATEAU_FROM of the way out to the step's
-        inner side (median): a disc's plateau or rim, where a glow or a cone keeps rising inwards."""
-        lo = int(PLATEAU_FROM * j)
-        return float(_median(self.profile[k, lo : max(lo + 1, j - self.gap + 1)]))
+    def plateaus(self, rays: np.ndarray, at: np.ndarray) -> np.ndarray:
+        """The light of each ray ``rays[i]`` inside radial index ``at[i]``, from PLATEAU_FROM of the way out to
+        the step's inner side (median): a disc's plateau or rim, where a glow or a cone keeps rising inwards."""
+        lo = (PLATEAU_FROM * np.asarray(at)).astype(np.int64)
+        return _row_medians(self.profile, rays, lo, np.maximum(lo + 1, np.asarray(at) - self.gap + 1)).astype(np.float64)
 
-    def crossing(self, k: int, j: int, level: float) -> float | None:
-        """The radius where ray ``k`` falls through ``level`` nearest radial index ``j`` (linear
-        interpolation), within the step's sides; None where it does not."""
-        lo, hi = max(0, j - self.gap - self.side // 2), min(len(self.radii) - 1, j + self.gap + self.side // 2)
-        p = self.profile[k, lo : hi + 1]
-        above = p >= level
-        crossings = np.nonzero(above[:-1] & ~above[1:])[0]
-        if not len(crossings):
-            return None
-        c = crossings[np.argmin(np.abs(crossings + lo - j))]
-        t = (p[c] - level) / max(float(p[c] - p[c + 1]), 1e-12)
-        return float(self.radii[lo + c] + t * self.step)
+    def crossings(self, rays: np.ndarray, at: np.ndarray, levels: np.ndarray) -> np.ndarray:
+        """The radius where each ray ``rays[i]`` falls through ``levels[i]`` nearest radial index ``at[i]``
+        (linear interpolation), within the step's sides; NaN where it does not. The levels' type
+        is the arithmetic's: float64, or float32, the profile's own."""
+        rays, at = np.asarray(rays, np.int64), np.asarray(at, np.int64)
+        reach = self.gap + self.side // 2
+        lo = np.maximum(0, at - reach)
+        hi = np.minimum(len(self.radii) - 1, at + reach)
+        index = lo[:, None] + np.arange(2 * reach + 1)
+        p = self.profile[rays[:, None], np.minimum(index, len(self.radii) - 1)]
+        above = p >= levels[:, None]
+        falls = above[:, :-1] & ~above[:, 1:] & (index[:, 1:] <= hi[:, None])
+        # the fall nearest the index, the first of equals
+        c = np.argmin(np.where(falls, np.abs(index[:, :-1] - at[:, None]), np.iinfo(np.int64).max), axis=1)
+        each = np.arange(len(rays))
+        found = falls[each, c]
+        p_c, p_next = p[each, c], p[each, c + 1]
+        drop = np.maximum((p_c - p_next).astype(np.float64), 1e-12).astype(levels.dtype)
+        t = (p_c - levels) / drop
+        radii = self.radii[lo + c] + t * levels.dtype.type(self.step)
+        return np.where(found, radii, np.nan)
 
 
 def _smooth_curve(angles: np.ndarray, edge: np.ndarray, seen: np.ndarray, radius: float):
@@ -263,20 +272,20 @@ def _trace(crop, centre_rc, radius, noise, band_px) -> tuple[np.ndarray, np.ndar
         return NoDisc(Reason.FAINT)
     typical = float(np.median(steps[positive]))
 
-    def shows_edge(step, outside, farther, sigma_k) -> bool:
+    def shows_edge(step, outside, farther, sigma_k) -> np.ndarray:
         # The disc's own step: significant, of about its contrast, and onto its ground or other light
         # over it (light adds), not onto something darker in front of it, beyond which the light
-        # comes back (an occluder's edge).
-        return (step > MIN_STEP_SIGMA * sigma_k and STEP_RATIO[0] * typical <= step <= STEP_RATIO[1] * typical
-                and not outside < farther - OCCLUDER_DROP * typical)
+        # comes back (an occluder's edge). Over arrays of rays.
+        return ((step > MIN_STEP_SIGMA * sigma_k) & (STEP_RATIO[0] * typical <= step) & (step <= STEP_RATIO[1] * typical)
+                & ~(outside < farther - OCCLUDER_DROP * typical))
 
     edge = rays.radii[path].astype(np.float64)
+    shown = np.nonzero(positive)[0]
+    shown = shown[shows_edge(steps[shown], outer[shown], beyond[shown], sigma[shown])]
+    where = rays.crossings(shown, path[shown], outer[shown] + 0.5 * steps[shown])
     seen = np.zeros(rays.count, bool)
-    for k in np.nonzero(positive)[0]:
-        if shows_edge(steps[k], outer[k], beyond[k], sigma[k]):
-            where = rays.crossing(k, path[k], outer[k] + 0.5 * steps[k])
-            if where is not None:
-                edge[k], seen[k] = where, True
+    seen[shown] = ~np.isnan(where)
+    edge[seen] = where[~np.isnan(where)]
     if seen.mean() < MIN_SEEN:
         return NoDisc(Reason.NO_OUTLINE)
     curve, on, tolerance = _smooth_curve(rays.angles, edge, seen, radius)
@@ -290,26 +299,29 @@ def _trace(crop, centre_rc, radius, noise, band_px) -> tuple[np.ndarray, np.ndar
         if j1 > j0:
             again.append(k)
             at.append(j0 + int(np.argmin(rays.slope[k, j0 : j1 + 1])))
-    levels = zip(*rays.levels(again, at), rays.sigma(np.array(at, np.int64)))
-    for k, j, values in zip(again, at, levels):
-        # Python floats: the crossing compares the float32 profile with such a level in float32 (NEP 50).
-        inside_k, outside_k, beyond_k, framed_k, sigma_k = map(float, values)
-        if framed_k and shows_edge(inside_k - outside_k, outside_k, beyond_k, sigma_k):
-            where = rays.crossing(k, j, outside_k + 0.5 * (inside_k - outside_k))
-            if where is not None and abs(where - curve[k]) <= near * rays.step:
-                edge[k], on[k], outer[k] = where, True, outside_k
+    again, at = np.array(again, np.int64), np.array(at, np.int64)
+    inside_a, outside_a, beyond_a, framed_a = rays.levels(again, at)
+    shown = framed_a & shows_edge(inside_a - outside_a, outside_a, beyond_a, rays.sigma(at))
+    # The levels as float32, the profile's: the crossings are taken in its arithmetic here.
+    where = rays.crossings(again[shown], at[shown], (outside_a + 0.5 * (inside_a - outside_a))[shown].astype(np.float32))
+    back = np.abs(where - curve[again[shown]]) <= near * rays.step  # False where there is no crossing (NaN)
+    back_rays = again[shown][back]
+    edge[back_rays], on[back_rays], outer[back_rays] = where[back], True, outside_a[shown][back]
     if on.mean() < MIN_SEEN:
         return NoDisc(Reason.NO_OUTLINE)
     # A step, not a ramp or a glow: the light falls across the edge within a share of the distance
     # between the step's two sides, and inside it is a plateau or a rim, not a rise to a peak.
     at = np.clip(np.round(edge / rays.step).astype(int), 1, len(rays.radii) - 2)
-    falls, rises = [], []
-    for k in np.nonzero(on)[0]:
-        near_inside = float(_median(rays.profile[k, max(0, at[k] - rays.gap - rays.side) : at[k] - rays.gap + 1]))
-        step_k = max(near_inside - outer[k], 1e-12)
-        steepest = float(rays.slope[k, max(0, at[k] - rays.gap) : at[k] + rays.gap + 1].min())
-        falls.append(step_k / max(-steepest, 1e-12))
-        rises.append((float(_median(rays.profile[k, : max(1, int(RISE_CORE * at[k]))])) - near_inside) / step_k)
+    ks = np.nonzero(on)[0]
+    at_k = at[ks]
+    near_inside = _row_medians(rays.profile, ks, np.maximum(0, at_k - rays.gap - rays.side), at_k - rays.gap + 1).astype(np.float64)
+    step_k = np.maximum(near_inside - outer[ks], 1e-12)
+    span = 2 * rays.gap + 1  # the steepest slope within the gap of the edge
+    slopes = rays.slope[ks[:, None], np.clip(at_k[:, None] - rays.gap + np.arange(span), 0, len(rays.radii) - 1)]
+    steepest = slopes.min(axis=1).astype(np.float64)
+    falls = step_k / np.maximum(-steepest, 1e-12)
+    core = _row_medians(rays.profile, ks, np.zeros_like(ks), np.maximum(1, (RISE_CORE * at_k).astype(np.int64))).astype(np.float64)
+    rises = (core - near_inside) / step_k
     if float(np.median(falls)) > MAX_RAMP_SHARE * (2 * rays.gap + rays.side) * rays.step or float(np.median(rises)) > MAX_RISE:
         return NoDisc(Reason.SOFT_EDGE)
     edge = _fill(rays.angles, edge, on)
@@ -318,7 +330,7 @@ def _trace(crop, centre_rc, radius, noise, band_px) -> tuple[np.ndarray, np.ndar
     lift = background - float(np.percentile(outer[on], 10))
     # The disc's contrast, for its tests (the edge's width among them): its plateau over the ground, not
     # the step's two sides alone (a glow's local step is as steep as a disc's; its rise inwards is not).
-    contrast = float(np.median([rays.plateau(k, at[k]) - outer[k] for k in np.nonzero(on)[0]]))
+    contrast = float(np.median(rays.plateaus(ks, at_k) - outer[ks]))
     return outline, on, Levels(background, background + max(contrast, typical), noise, lift)
 
 
