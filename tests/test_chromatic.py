@@ -80,6 +80,25 @@ def test_a_lens_without_colour_error_gets_no_chromatic_model():
     assert "|red| ≥ " in trial["reason"] and "% needed" in trial["reason"], trial
 
 
+def test_a_grey_photo_is_measured_once_a_disc_with_no_colour_error(monkeypatch):
+    """A photo whose channels are the same (a monochrome camera's, a black-and-white print's) shows no
+    colour error: each disc's outline is measured in one channel, not three, and the colours come out
+    as the three measures would give them, 0 exactly, from as many discs, not significant."""
+    import bokehfit.fit.chromatic as chromatic
+
+    grey = np.repeat(luminance(disc_photo(0.0, 0.0))[..., None], 3, axis=2)
+    calls = []
+    measure = chromatic.outline_diameter
+    monkeypatch.setattr(chromatic, "outline_diameter", lambda *a, **k: calls.append(1) or measure(*a, **k))
+    found = measured(grey)
+    assert len(calls) == len(CENTRES)
+    assert found is not None and found.discs == len(CENTRES) and not found.significant
+    assert found.chromatic.red == 0.0 and found.chromatic.blue == 0.0
+    coloured = disc_photo(0.04, -0.03)
+    calls.clear()
+    assert measured(coloured).significant and len(calls) == 3 * len(CENTRES)
+
+
 def test_colours_of_too_few_discs_are_not_measured_and_the_report_says_why():
     rgb = np.ascontiguousarray(disc_photo(0.04, -0.03)[:120, :240])  # two of the discs
     fit = fit_aperture(luminance(rgb), find_discs(luminance(rgb)).discs, shapes=["circle"],

@@ -126,7 +126,7 @@ def measure_chromatic(rgb: Callable[[slice, slice], np.ndarray], discs: Sequence
         r1, c1 = min(height, row + half + 1), min(width, col + half + 1)
         window = np.asarray(rgb(slice(r0, r1), slice(c0, c1)), dtype=np.float32)
         centre = (disc.center_xy[0] - c0, disc.center_xy[1] - r0)
-        sizes = [outline_diameter(np.ascontiguousarray(window[..., c]), centre, disc.diameter_px) for c in range(3)]
+        sizes = _channel_diameters(window, centre, disc.diameter_px)
         if any(size is None for size in sizes):
             continue
         red, green, blue = sizes
@@ -138,6 +138,17 @@ def measure_chromatic(rgb: Callable[[slice, slice], np.ndarray], discs: Sequence
     significant = bool(np.any((np.abs(median) >= bar) & (np.abs(median) >= MIN_CHROMATIC)))
     return ChromaticMeasure(Chromatic(float(median[0]), float(median[1])), Chromatic(float(error[0]), float(error[1])),
                             len(ratios), significant, Chromatic(float(bar[0]), float(bar[1])))
+
+
+def _channel_diameters(window: np.ndarray, centre: tuple[float, float], diameter_px: float) -> list[float | None]:
+    """The disc's 50 % outline diameter in each of the window's three channels; a channel the same as
+    one before it (a grey photo's) is that one's number, not measured again."""
+    channels = [np.ascontiguousarray(window[..., c]) for c in range(3)]
+    sizes: list[float | None] = []
+    for c, channel in enumerate(channels):
+        same = next((k for k in range(c) if np.array_equal(channels[k], channel)), None)
+        sizes.append(sizes[same] if same is not None else outline_diameter(channel, centre, diameter_px))
+    return sizes
 
 
 def median_and_bar(values: np.ndarray, readable: Sequence[float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
