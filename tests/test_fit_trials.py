@@ -16,9 +16,9 @@ from bokehfit.apertures import make_aperture
 from bokehfit.discs import find_discs
 from bokehfit.fit.crop import crop_disc
 from bokehfit.fit.families import families_for
-from bokehfit.fit.pixels import fit_discs
+from bokehfit.fit.pixels import TOLERANCE, fit_discs
 from bokehfit.fit.result import DiscFit
-from bokehfit.fit.stages import TRIAL_TOLERANCE, fit_winner
+from bokehfit.fit.stages import TRIAL_TOLERANCE, Screened, fit_winner
 from bokehfit.synthetic import SyntheticDisc, render_discs
 
 
@@ -54,7 +54,8 @@ def test_the_winners_trials_are_carried_on_to_the_fits_own_tolerance():
 
     # What fit_winner reads of stages 1 and 2, and of the options: every disc a model disc.
     chosen = SimpleNamespace(discs=found)
-    screened = SimpleNamespace(crops=crops, screens=[[]] * len(crops), by_family=[{}] * len(crops))
+    screened = SimpleNamespace(crops=crops, screens=[[]] * len(crops), by_family=[{}] * len(crops),
+                               trial_tolerance=TRIAL_TOLERANCE)
     carried = fit_winner(chosen, screened, trials, hexagon, SimpleNamespace(model_discs=len(crops)), None)
     assert len(carried) == len(crops)
     for item, crop in zip(carried, crops):
@@ -65,6 +66,20 @@ def test_the_winners_trials_are_carried_on_to_the_fits_own_tolerance():
     rough = [item.fits[hexagon.name] for item in trials]
     assert any(abs(r.angle_deg - c.fits[hexagon.name].angle_deg) > 0.01 or abs(r.diameter_px - c.fits[hexagon.name].diameter_px) > 0.01
                for r, c in zip(rough, carried))  # the loose trials were somewhere else: the check has something to check
+
+
+def test_a_lone_candidate_is_fitted_to_the_fits_own_tolerance_at_once():
+    """Where one candidate is left after the screen, there is no rank for its trials to decide: they are
+    fitted to the fit's own tolerance, and the winner's fits are those trials, not carried on again."""
+    found, crops = crops_of("circle", 0.0)
+    circle, hexagon = families_for(["circle"])[0], families_for(["hexagon"])[0]
+    assert Screened(crops, [], [], [circle]).trial_tolerance == TOLERANCE
+    assert Screened(crops, [], [], [circle, hexagon]).trial_tolerance == TRIAL_TOLERANCE
+    trials = [DiscFit(disc, [], {circle.name: fit_discs([crop], circle, circle.aperture).fits[0]})
+              for disc, crop in zip(found, crops)]
+    screened = SimpleNamespace(crops=crops, screens=[[]] * len(crops), by_family=[{}] * len(crops), trial_tolerance=TOLERANCE)
+    kept = fit_winner(SimpleNamespace(discs=found), screened, trials, circle, SimpleNamespace(model_discs=len(crops)), None)
+    assert [item.fits[circle.name] for item in kept] == [item.fits[circle.name] for item in trials]
 
 
 @pytest.mark.parametrize("roundness, rounded_fitted", [(0.0, False), (1.0, False), (0.5, True)])

@@ -33,7 +33,7 @@ from bokehfit.fit.choice import choose_discs, slit_aspect
 from bokehfit.fit.families import FAMILIES, Family
 from bokehfit.fit.features import FeatureTrial, add_feature, feature_asks
 from bokehfit.fit.crop import DiscCrop, crop_disc
-from bokehfit.fit.pixels import JointFit, PixelFit, fit_discs
+from bokehfit.fit.pixels import TOLERANCE, JointFit, PixelFit, fit_discs
 from bokehfit.fit.result import CandidateModel, DiscFit, FitOptions
 from bokehfit.fit.signature import Screen, screen
 
@@ -120,6 +120,13 @@ class Screened:
     screens: list[list[Screen]]  #: by disc, every family screened
     by_family: list[dict[Family, Screen]]  #: the same screens by disc, by family
     candidates: list[Family]  #: the shortlisted families, each straight and, where its outlines look rounder, rounded
+
+    @property
+    def trial_tolerance(self) -> float:
+        """The tolerance of the families' fits on the model discs (stage 3): TRIAL_TOLERANCE where they
+        rank several candidates; the fit's own where one candidate is left, which has no rank to win
+        and is the winner already (its fits then need no carrying on: :func:`fit_winner`)."""
+        return TRIAL_TOLERANCE if len(self.candidates) > 1 else TOLERANCE
 
 
 def _shortlist(families: tuple[Family, ...], rounded_of: dict[Family, Family], by_family: list[dict[Family, Screen]],
@@ -208,14 +215,14 @@ def _fit_start(aperture: Aperture) -> Aperture:
 def fit_families(chosen: Chosen, screened: Screened, options: FitOptions,
                  progress: Callable[[int, int], None] | None, clock: Clock) -> list[DiscFit]:
     """Stage 3: each candidate family fitted alone to each of the first ``options.model_discs`` discs
-    (timed by family), from its screen's aperture, to TRIAL_TOLERANCE."""
+    (timed by family), from its screen's aperture, to ``screened.trial_tolerance``."""
     trials = []
     for i, (disc, crop, disc_screens, found) in enumerate(
         zip(chosen.discs[: options.model_discs], screened.crops, screened.screens, screened.by_family)
     ):
         fits = {}
         for g in screened.candidates:
-            fits[g.name] = fit_discs([crop], g, _fit_start(found[g].aperture), tolerance=TRIAL_TOLERANCE).fits[0]
+            fits[g.name] = fit_discs([crop], g, _fit_start(found[g].aperture), tolerance=screened.trial_tolerance).fits[0]
             clock(f"family {g.name}")
         trials.append(DiscFit(disc, disc_screens, fits))
         if progress is not None:
@@ -259,11 +266,15 @@ def select_model(trials: list[DiscFit], screened: Screened) -> Selection:
 def fit_winner(chosen: Chosen, screened: Screened, trials: list[DiscFit], winner: Family, options: FitOptions,
                progress: Callable[[int, int], None] | None) -> list[DiscFit]:
     """Stage 5: every chosen disc's fits: ``trials``, the winner's carried on from where its trial stopped
-    (TRIAL_TOLERANCE) to the fit's own tolerance, then the winner alone on each disc after the model discs."""
-    disc_fits = [
-        dataclasses.replace(item, fits={**item.fits, winner.name: _carried_on(crop, winner, item.fits[winner.name])})
-        for item, crop in zip(trials, screened.crops)
-    ]
+    (TRIAL_TOLERANCE) to the fit's own tolerance where the trials ranked several candidates, then the
+    winner alone on each disc after the model discs."""
+    if screened.trial_tolerance < TRIAL_TOLERANCE:  # the trials were fitted to the fit's own tolerance
+        disc_fits = list(trials)
+    else:
+        disc_fits = [
+            dataclasses.replace(item, fits={**item.fits, winner.name: _carried_on(crop, winner, item.fits[winner.name])})
+            for item, crop in zip(trials, screened.crops)
+        ]
     start = options.model_discs
     for i, (disc, crop, disc_screens, found) in enumerate(
         zip(chosen.discs[start:], screened.crops[start:], screened.screens[start:], screened.by_family[start:]), start
