@@ -44,6 +44,26 @@ def test_kernel_drawn_is_the_aperture_reported(hexagon_run):
     assert f"The fitted aperture at {aperture['angle_deg']:.2f}°" in page
 
 
+def test_disc_tiles_are_stored_at_the_windows_own_pixels_and_shown_at_the_tiles_size(hexagon_run):
+    """Each disc's photo, model and residual tiles are shown at DISC_TILE_PX, enlarged by the browser as
+    pixels (image-rendering: pixelated) from the window's own pixels where the window is smaller: the
+    default photo's discs are 55 px, their windows under the tile's 120."""
+    import base64
+
+    import cv2
+
+    from bokehfit.report.html import DISC_TILE_PX
+
+    _, _, page, _ = hexagon_run
+    assert ".tile img { image-rendering: pixelated; }" in page
+    tiles = re.findall(r'<img src="data:image/png;base64,([A-Za-z0-9+/=]+)" width="(\d+)" height="(\d+)" alt="(photo|model|residual)"', page)
+    assert tiles
+    for data, width, height, _ in tiles:
+        image = cv2.imdecode(np.frombuffer(base64.b64decode(data), np.uint8), cv2.IMREAD_UNCHANGED)
+        assert int(width) == int(height) == DISC_TILE_PX
+        assert image.shape[0] == image.shape[1] < DISC_TILE_PX
+
+
 def test_one_angle_and_one_diameter_everywhere(hexagon_run):
     stdout, document, page, _ = hexagon_run
     aperture = document["aperture"]

@@ -31,7 +31,7 @@ __all__ = ["build_html", "aperture_diagram", "MAX_OVERVIEW_PX", "DISC_TILE_PX", 
 
 #: Longest side of the photo overview, pixels.
 MAX_OVERVIEW_PX = 1600
-#: Side of each disc tile (crop, model, residual), pixels.
+#: Side of each disc tile (crop, model, residual) as shown, pixels (a smaller window is stored at its own pixels).
 DISC_TILE_PX = 120
 #: Discs shown with their model.
 MAX_DISC_TILES = 12
@@ -53,6 +53,7 @@ th { background: #f5f5f7; } td:first-child, th:first-child { text-align: left; }
 .no_fit, .no_discs { background: #fdecea; border-color: #d55e00; }
 .head { display: flex; gap: 24px; align-items: flex-start; } .head .facts { flex: 1; }
 .tiles { display: flex; flex-wrap: wrap; gap: 14px; } .tile { text-align: center; font-size: 12px; }
+.tile img { image-rendering: pixelated; }
 .scale { display: inline-block; font-size: 12px; margin: 6px 18px 6px 0; }
 .bar { width: 220px; height: 12px; border: 1px solid #999; }
 .ticks { display: flex; justify-content: space-between; width: 222px; }
@@ -149,12 +150,15 @@ def _disc_tiles(comparison: Comparison, entries: dict[int, dict]) -> str:
             caption += f", {entry['angle_deg']:.1f}°"
         if entry.get("iou") is not None:
             caption += f", IoU {entry['iou']:.2f}"
+        # A window smaller than the tile is stored at its own pixels, which the browser enlarges as
+        # they are (image-rendering: pixelated); a larger one is reduced to the tile.
+        side = min(DISC_TILE_PX, crop.shape[0])
         images = "".join(
             f'<img src="{_data_uri(image)}" width="{DISC_TILE_PX}" height="{DISC_TILE_PX}" alt="{alt}" title="{alt}">'
             for image, alt in (
-                (grey8(crop, low, high, DISC_TILE_PX), "photo"),
-                (grey8(model, low, high, DISC_TILE_PX), "model"),
-                (residual8(residual, RESIDUAL_SPAN * (high - low), DISC_TILE_PX), "residual"),
+                (grey8(crop, low, high, side), "photo"),
+                (grey8(model, low, high, side), "model"),
+                (residual8(residual, RESIDUAL_SPAN * (high - low), side), "residual"),
             )
         )
         tiles.append(f'<div class="tile">{images}<br>{html.escape(caption)}</div>')
