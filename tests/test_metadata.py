@@ -18,7 +18,6 @@ import numpy as np
 import pytest
 from photo_factory import write_jpeg
 
-from bokehfit.compare import compare_photo
 from bokehfit.io import load_photo
 from bokehfit.optics import FStop, Geometry, coc_mm, estimate_fstop, resolve_geometry
 

@@ -13,7 +13,6 @@ import json
 import re
 import subprocess
 import sys
-import time
 import urllib.error
 import urllib.request
 from pathlib import Path
@@ -339,7 +338,7 @@ def test_kernel_renderer_is_served_as_the_package_compiles_it(server):
     assert set(kernel["bindings"]) == {"params", "counts", "aperture", "mask_table"}
 
 
-def _half_mask(image) -> "np.ndarray":
+def _half_mask(image):
     """Pixels at or above half the disc's plateau (its 90th percentile of lit pixels)."""
     import numpy as np
 
