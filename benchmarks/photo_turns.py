@@ -31,7 +31,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from survey_speed import COMPARE_ARGS, SENSOR_WIDTH_MM, make_library  # noqa: E402
+from survey_speed import COMPARE_ARGS, FOCUS_DISTANCE_MM, SENSOR_WIDTH_MM, make_library  # noqa: E402
 
 
 def worker(library: Path) -> None:
@@ -41,7 +41,7 @@ def worker(library: Path) -> None:
     paths = sorted(library.glob("*.jpg"))
     init_worker(ignore_sigint=False, workers=1)
     shapes = COMPARE_ARGS[COMPARE_ARGS.index("--shapes") + 1].split(",")
-    options = {"shapes": shapes, "sensor_width_mm": float(SENSOR_WIDTH_MM), "focus_distance_m": 2.0}
+    options = {"shapes": shapes, "sensor_width_mm": float(SENSOR_WIDTH_MM), "focus_distance_m": FOCUS_DISTANCE_MM / 1000.0}
     tasks = [PhotoTask(str(p), hashlib.sha256(p.read_bytes()).hexdigest(), options, "bokehfit survey") for p in paths]
     for task in tasks[:2]:
         survey_photo(task)
