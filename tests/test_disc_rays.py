@@ -198,17 +198,19 @@ def _bright_centre_disc(shape, centre, radius, seed):
 @pytest.mark.parametrize("radius,seed", [(12.0, 1), (12.0, 2), (13.0, 3)])
 def test_the_search_measures_a_bright_centre_blob_by_its_step(radius, seed, monkeypatch):
     """The blob's half-peak region is its core; one level between its peak and the ground runs along the
-    shoulder, whose fall is as wide as the disc ("soft edge"), and the contour finds no disc. The disc's
-    own step at its edge is sharp: measured along rays, the blob is the disc at its edge."""
+    shoulder, whose fall is as wide as the disc ("soft edge"), and the contour finds no sharp disc (at most
+    the shoulder's outline, inside the disc, as a soft-edged one). The disc's own step at its edge is sharp:
+    measured along rays, the blob is the disc at its edge, a sharp disc."""
     from bokehfit.discs import search
 
     shape, centre = (160, 160), (80.3, 79.6)
     image = _bright_centre_disc(shape, centre, radius, seed)
     monkeypatch.setattr(search, "BLOB_RAYS_MIN_DIAMETER_PX", math.inf)
-    assert not [d for d in search.find_discs(image, None, min_diameter_px=8).discs if d.usable]  # the contour alone
+    alone = [d for d in search.find_discs(image, None, min_diameter_px=8).discs if d.usable]  # the contour alone
+    assert all(d.soft_edge and d.diameter_px < 2 * radius * 0.92 for d in alone), [(d.soft_edge, d.diameter_px) for d in alone]
     monkeypatch.undo()
     usable = [d for d in search.find_discs(image, None, min_diameter_px=8).discs if d.usable]
-    assert len(usable) == 1, [(d.center_xy, d.diameter_px) for d in usable]
+    assert len(usable) == 1 and not usable[0].soft_edge, [(d.center_xy, d.diameter_px) for d in usable]
     assert abs(usable[0].diameter_px / (2 * radius) - 1) < 0.08, usable[0].diameter_px
     assert math.hypot(usable[0].center_xy[0] - centre[0], usable[0].center_xy[1] - centre[1]) < 1.0
 

@@ -3,7 +3,7 @@
 The labels (``discs/NAME.discs.json`` beside the reference photos, format in
 :mod:`bokehfit.discs.labels`) list every disc a person reads the aperture from and
 the bright blobs that are not discs. ``benchmarks/real_discs.py`` prints the full
-table; these tests hold the pooled recall reached (147 of 268 usable discs on 2026-11-29)
+table; these tests hold the pooled recall reached (155 of 268 usable discs on 2026-12-01)
 and a junk share of at most 13 % of the used discs of known nature (8 of 81 then), so that
 they can only move towards the goal (recall 90 %, junk 3 %).
 """
@@ -21,7 +21,7 @@ from bokehfit.discs.labels import score_discs
 MANIFEST = json.loads((Path(__file__).resolve().parents[1] / "reference_photos" / "manifest.json").read_text(encoding="utf-8"))
 NAMES = [entry["file"] for entry in MANIFEST["photos"]]
 #: Floors of this round's finder and fit (the module's docstring), pooled over the labelled photos.
-MIN_POOLED_RECALL = 0.54
+MIN_POOLED_RECALL = 0.57
 MAX_POOLED_JUNK_SHARE = 0.13
 
 

@@ -55,6 +55,8 @@ def disc_table(search: DiscSearch, rows: int = TABLE_ROWS) -> str:
     lines = [f"{'#':>4} {'x':>8} {'y':>8} {'diam px':>8} {'snr':>6}  flags"]
     for disc in search.discs[:rows]:
         flags = [name for name in ("saturated", "clipped", "overlaps") if getattr(disc, name)]
+        if disc.soft_edge:
+            flags.append("soft edge")
         if not disc.resolvable:
             flags.append("small")
         lines.append(

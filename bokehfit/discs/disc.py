@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 import time
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
@@ -73,6 +73,9 @@ class Disc:
     bright_centre: bool = False  #: centre brighter than the rim, the edge a step below it (rim < 0)
     occluded: bool = False  #: crossed by a thin occluder (bridged, outline there not seen)
     clipped_share: float = 0.0  #: share of the disc's area clipped in the source
+    #: Its edge is wider than a sharp disc's (:func:`bokehfit.discs.verdict.soft_edged`): a disc whose light
+    #: falls from a bright centre, or a glow as soft; second-tier evidence, fitted only beside sharp discs.
+    soft_edge: bool = False
 
     @property
     def usable(self) -> bool:
@@ -117,6 +120,7 @@ class Disc:
             "bright_centre": bool(self.bright_centre),
             "occluded": bool(self.occluded),
             "clipped_share": round(float(self.clipped_share), 4),
+            "soft_edge": bool(self.soft_edge),
         }
         if outline:
             data["outline_xy"] = np.round(self.outline_xy, 3).tolist()
@@ -246,13 +250,37 @@ def _check_parameters(shape, clipped, min_diameter_px, max_diameter_px, max_disc
     return clipped, min_diameter_px, max_diameter_px, max_discs
 
 
-def _discs_of(measurements, found, rejected, start, notes, rejections, max_discs, given: bool = False) -> DiscSearch:
+def _discs_of(measurements, found, rejected, start, notes, rejections, max_discs, given: bool = False,
+              soft=()) -> DiscSearch:
     """The search's discs from its measurements: one per disc, largest first, each with what it offers (``given``:
-    the places were a person's, :attr:`DiscSearch.given`)."""
+    the places were a person's, :attr:`DiscSearch.given`). ``soft``: the soft-edged discs the search measured
+    ((measurement, its rejection) each, :func:`bokehfit.discs.verdict.soft_edged`), kept as discs of the second
+    tier where they lie clear of every sharp disc (:func:`_clear_of`): their rejections leave ``rejections`` and
+    ``rejected``. The sharp discs are made from their own measurements alone, as without them."""
     measurements = _distinct_measurements(measurements)
     measurements.sort(key=lambda m: -m.diameter_px)
     if max_discs is not None:
         measurements = measurements[:max_discs]
+    discs = _made(measurements)
+    kept = _clear_of(measurements, _distinct_measurements([m for m, _ in soft]))
+    if kept:
+        clusters = max((d.cluster for d in discs if d.cluster is not None), default=-1) + 1
+        discs += _made(kept, clusters, soft_edge=True)
+        discs.sort(key=lambda d: -d.diameter_px)  # stable: the sharp discs keep their order
+        discs = [replace(d, index=i) for i, d in enumerate(discs)][:max_discs]
+        taken = {id(m) for m in kept}
+        dropped = {id(r) for m, r in soft if id(m) in taken}
+        rejected = rejected.copy()
+        for m, r in soft:
+            if id(m) in taken:
+                rejected[r.rejected_because] -= 1
+        rejections = [r for r in rejections if id(r) not in dropped]
+    return DiscSearch(discs, found, +rejected, time.perf_counter() - start, tuple(notes), tuple(rejections), given)
+
+
+def _made(measurements: list[Measurement], first_cluster: int = 0, soft_edge: bool = False) -> list[Disc]:
+    """The discs of ``measurements`` (largest first), indexed in that order, each with its own share of its
+    outline, its cluster (numbered from ``first_cluster``) and what it offers."""
     overlaps = _flag_neighbours(measurements)
     own, clusters = _own_outlines(measurements)
     discs = []
@@ -280,14 +308,37 @@ def _discs_of(measurements, found, rejected, start, notes, rejections, max_discs
                 evidence=evidence,
                 outline_seen=seen,
                 outline_reliable=reliable,
-                cluster=cluster,
+                cluster=None if cluster is None else first_cluster + cluster,
                 ring=m.ring,
                 bright_centre=m.bright_centre,
                 occluded=m.occluded,
                 clipped_share=m.clipped_share,
+                soft_edge=soft_edge,
             )
         )
-    return DiscSearch(discs, found, +rejected, time.perf_counter() - start, tuple(notes), tuple(rejections), given)
+    return discs
+
+
+def _clear_of(sharp: list[Measurement], soft: list[Measurement]) -> list[Measurement]:
+    """The soft-edged measurements, largest first, whose outlines lie clear of every sharp disc's (none of their
+    points within OVERLAP_MARGIN_PX of one, and none of the sharp disc's inside theirs): a soft blob against a
+    sharp disc is its light or its neighbour's glow, and the sharp disc already says what that place shows."""
+    if not soft:
+        return []
+    if not sharp:
+        return sorted(soft, key=lambda m: -m.diameter_px)
+    centres = np.array([m.center_xy for m in sharp])
+    reach = np.array([np.max(np.hypot(*(m.outline_xy - m.center_xy).T)) for m in sharp])
+    tree = cKDTree(centres)
+    clear = []
+    for m in soft:
+        own_reach = float(np.max(np.hypot(*(m.outline_xy - m.center_xy).T)))
+        near = [j for j in tree.query_ball_point(m.center_xy, own_reach + reach.max() + OVERLAP_MARGIN_PX)
+                if np.hypot(*(centres[j] - m.center_xy)) <= own_reach + reach[j] + OVERLAP_MARGIN_PX]
+        if not any(_within_outline(m.outline_xy, sharp[j].outline_xy, OVERLAP_MARGIN_PX).any()
+                   or _within_outline(sharp[j].outline_xy, m.outline_xy, OVERLAP_MARGIN_PX).any() for j in near):
+            clear.append(m)
+    return sorted(clear, key=lambda m: -m.diameter_px)
 
 
 def _flag_neighbours(measurements: list[Measurement]) -> list[bool]:

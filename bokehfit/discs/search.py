@@ -18,7 +18,10 @@
 5. The discs whose contour runs into their neighbours' light measured again by their own step
    (:func:`bokehfit.discs.places._by_own_steps`).
 6. The result (:func:`bokehfit.discs.disc._discs_of`): one per disc, largest first, each with
-   what it offers.
+   what it offers. The blobs and places refused only for an edge too soft for a sharp disc's that are
+   soft-edged discs (:func:`bokehfit.discs.verdict.soft_edged`: a bright-centred disc's light falls to its
+   edge, and so does a glow's) were kept apart through steps 2–5, claiming no candidate and seeding no
+   chain; those clear of every sharp disc join the result flagged ``soft_edge``, the fit's second tier.
 """
 
 from __future__ import annotations
@@ -62,7 +65,7 @@ from bokehfit.discs.places import (
 from bokehfit.discs.rays import measure_rays
 from bokehfit.discs.reasons import NoDisc, Reason
 from bokehfit.discs.scales import PhotoScales
-from bokehfit.discs.verdict import rim_above_centre, ring_all_round
+from bokehfit.discs.verdict import light_ends, rim_above_centre, ring_all_round, soft_edged
 from bokehfit.errors import InputError
 
 #: Smallest disc the detector seeks by default (``bokehfit discs``): glints from 4 px are counted.
@@ -163,15 +166,17 @@ def find_discs(
     rejected: Counter = Counter()
     notes: list[str] = []
     rejections: list[Rejection] = []
+    soft: list[tuple[Measurement, Rejection]] = []  # soft-edged discs, kept apart (step 6)
     candidates, found = _candidates(luminance, min_diameter_px, search_max_px, rejected, notes)
     measurements = _measure_candidates(luminance, clipped, candidates, min_diameter_px, max_diameter_px, progress,
-                                       rejected, rejections, rgb)
+                                       rejected, rejections, rgb, soft)
     found += _circle_discs(luminance, clipped, measurements, min_diameter_px, min(max_diameter_px, search_max_px),
-                           rejected, rejections)
+                           rejected, rejections, soft)
     found += _sized_discs(luminance, clipped, measurements, min_diameter_px, min(max_diameter_px, search_max_px),
-                          rejected, rejections)
+                          rejected, rejections, soft)
     measurements = _by_own_steps(luminance, clipped, measurements, min_diameter_px)
-    return _discs_of(measurements, found, rejected, start, notes, rejections, max_discs)
+    soft = [(m, rejection) for m, rejection in soft if light_ends(luminance, m)]  # a glow's tail goes on
+    return _discs_of(measurements, found, rejected, start, notes, rejections, max_discs, soft=soft)
 
 
 def _candidates(luminance, min_diameter_px: float, search_max_px: float, rejected: Counter,
@@ -254,11 +259,13 @@ class _Measured:
 
 def _measure_candidates(luminance, clipped, candidates: list[Candidate], min_diameter_px: float,
                         max_diameter_px: float, progress: bool, rejected: Counter,
-                        rejections: list[Rejection], rgb: Callable | None = None) -> list[Measurement]:
+                        rejections: list[Rejection], rgb: Callable | None = None,
+                        soft: list | None = None) -> list[Measurement]:
     """The discs of the candidates, measured largest first: a candidate inside the outline of one
     measured before is its light, a cluster is measured as its discs (:func:`_measure_cluster`), a
     blob by its contour and its own step (:func:`_measure_blob`). Each that is no disc is counted in
-    ``rejected`` and listed in ``rejections`` with the reason."""
+    ``rejected`` and listed in ``rejections`` with the reason; a blob refused only for its soft edge that
+    is a soft-edged disc is also put in ``soft`` with its rejection (it claims no candidate)."""
     iterator = candidates
     if progress and len(candidates) > 200:
         from tqdm import tqdm
@@ -274,6 +281,10 @@ def _measure_candidates(luminance, clipped, candidates: list[Candidate], min_dia
             measured = _measure_cluster(scales, candidate, min_diameter_px, max_diameter_px)
         else:
             measured = _measure_blob(scales, candidate, min_diameter_px, max_diameter_px, rgb)
+        if isinstance(measured, tuple):  # a soft-edged disc: rejected here, kept apart
+            m, measured = measured
+            if soft is not None:
+                soft.append((m, measured))
         if isinstance(measured, Rejection):
             rejected[measured.rejected_because] += 1
             rejections.append(measured)
@@ -333,12 +344,14 @@ def _measure_cluster(scales: PhotoScales, candidate: Candidate, min_diameter_px:
 
 
 def _measure_blob(scales: PhotoScales, candidate: Candidate, min_diameter_px: float,
-                  max_diameter_px: float, rgb: Callable | None = None) -> _Measured | Rejection:
+                  max_diameter_px: float, rgb: Callable | None = None
+                  ) -> _Measured | Rejection | tuple[Measurement, Rejection]:
     """A blob candidate measured by its contour (at the scale its size needs) and, from
     BLOB_RAYS_MIN_DIAMETER_PX where the contour calls it one of BLOB_RAYS_AFTER, by its own step along rays
     (:func:`bokehfit.discs.places._by_rays_after`); where its edge is still soft, in its colours (``rgb``, where
     given: :func:`bokehfit.discs.colours.sharp_in_a_colour`); a rejection, where it was measured, where it is
-    no disc of the sizes sought."""
+    no disc of the sizes sought: with its measurement, (measurement, rejection), where it is a soft-edged disc
+    of those sizes (:func:`bokehfit.discs.verdict.soft_edged`)."""
     m = _measured_at_scale(scales, candidate, min_diameter_px)
     if isinstance(m, Measurement) and candidate.diameter_px >= BLOB_RAYS_MIN_DIAMETER_PX:
         m = _by_rays_after(scales.luminance, scales.clipped, m, candidate.center_xy, candidate.diameter_px,
@@ -350,7 +363,8 @@ def _measure_blob(scales: PhotoScales, candidate: Candidate, min_diameter_px: fl
         m = replace(m, reason=None)  # a lens's colour error spread its edge in luminance (bokehfit.discs.colours)
     reason = m.reason if m.reason is not None else (Reason.TOO_LARGE if m.diameter_px > max_diameter_px else None)
     if reason is not None:
-        return Rejection.of(m.center_xy, m.diameter_px, reason)
+        rejection = Rejection.of(m.center_xy, m.diameter_px, reason)
+        return (m, rejection) if soft_edged(m) and m.diameter_px <= max_diameter_px else rejection
     # A blob of overlapping discs is measured as its discs, each with the outline it shows.
     parts = split_cluster(m) if m.overlaps and m.diameter_px >= 2.0 * RESOLVABLE_PX else []
     if not parts:
@@ -358,11 +372,12 @@ def _measure_blob(scales: PhotoScales, candidate: Candidate, min_diameter_px: fl
     return _Measured(m.outline_xy, [p for p in parts if min_diameter_px <= p.diameter_px <= max_diameter_px])
 
 
-def _circle_discs(luminance, clipped, measurements, min_diameter_px, max_diameter_px, rejected, rejections) -> int:
+def _circle_discs(luminance, clipped, measurements, min_diameter_px, max_diameter_px, rejected, rejections,
+                  soft=None) -> int:
     """Measure the circles through the photo's edges (:mod:`bokehfit.discs.circles`: overlapping, faint
     and ring discs that no blob shows) that the blob search did not measure already, as places
     (:func:`_measure_place`), the clearest MAX_CIRCLES; kept where they pass the measurement's tests
-    of a disc. Returns how many were measured."""
+    of a disc (the soft-edged discs among the others put in ``soft``). Returns how many were measured."""
     places = find_circles(luminance, min_diameter_px, max_diameter_px)[:MAX_CIRCLES]
     seen = [(m.center_xy, m.diameter_px) for m in measurements] + [(r.center_xy, r.diameter_px) for r in rejections]
 
@@ -370,7 +385,8 @@ def _circle_discs(luminance, clipped, measurements, min_diameter_px, max_diamete
         rays_after = RAYS_AFTER if diameter >= RAYS_MIN_DIAMETER_PX else ()
         return _place_or_ring(luminance, clipped, xy, diameter, min_diameter_px, rays_after)
 
-    return _new_places(places, seen, measure, measurements, (min_diameter_px, max_diameter_px), rejected, rejections)
+    return _new_places(places, seen, measure, measurements, (min_diameter_px, max_diameter_px), rejected, rejections,
+                       soft)
 
 
 def _place_or_ring(luminance, clipped, xy, diameter: float, min_diameter_px: float,
@@ -384,7 +400,8 @@ def _place_or_ring(luminance, clipped, xy, diameter: float, min_diameter_px: flo
     return m
 
 
-def _sized_discs(luminance, clipped, measurements, min_diameter_px, max_diameter_px, rejected, rejections) -> int:
+def _sized_discs(luminance, clipped, measurements, min_diameter_px, max_diameter_px, rejected, rejections,
+                 soft=None) -> int:
     """Measure the circles of the sizes measured so far (:func:`bokehfit.discs.circles.find_sized_circles`)
     that are discs of a chain: each circle's outline crosses a measured disc's (:class:`_Chain`), where the
     blob search sees the chain as one blob and a disc shows its own edge over part of its outline. The
@@ -394,9 +411,9 @@ def _sized_discs(luminance, clipped, measurements, min_diameter_px, max_diameter
     discs to those the fit used as they found discs: RESULTS.md); and by that step where the contour's size is off the circle's
     (:func:`_nearer_the_asked`). Kept where they pass the measurement's tests of a disc and are the circle
     voted for (:func:`_the_circle_voted`: another measurement there is another light, its neighbours' merged
-    or a glow) and still a disc of the chain. A place a candidate was rejected at is measured again: the blob
-    there was measured at its own size, not the circle's. Then the circles on no chain, as rings only
-    (:func:`_lone_ring`). Returns how many were measured."""
+    or a glow) and still a disc of the chain (the soft-edged discs of a chain put in ``soft``). A place a
+    candidate was rejected at is measured again: the blob there was measured at its own size, not the circle's.
+    Then the circles on no chain, as rings only (:func:`_lone_ring`). Returns how many were measured."""
     seen = [(m.center_xy, m.diameter_px) for m in measurements]
     chain = _Chain(seen)
     found = [(xy, d) for xy, d, _ in find_sized_circles(luminance, seen) if min_diameter_px <= d <= max_diameter_px]
@@ -414,7 +431,7 @@ def _sized_discs(luminance, clipped, measurements, min_diameter_px, max_diameter
 
     sizes = (min_diameter_px, max_diameter_px)
     places = [(xy, d) for xy, d in found if chain.crosses(xy, d)]
-    measured = _new_places(places[:MAX_SIZED_CIRCLES], seen, measure, measurements, sizes, rejected, rejections)
+    measured = _new_places(places[:MAX_SIZED_CIRCLES], seen, measure, measurements, sizes, rejected, rejections, soft)
     # Those on no chain whose rim stands above their centre all round, where one was measured (a cheap look first).
     lone = [(xy, d) for xy, d in found if not chain.crosses(xy, d) and rim_above_centre(luminance, xy, d)]
     seen = [(m.center_xy, m.diameter_px) for m in measurements]
@@ -462,10 +479,11 @@ class _Chain:
                    < 0.5 * (diameter + self._discs[j][1]) for j in near)
 
 
-def _new_places(places, seen, measure, measurements, sizes, rejected, rejections) -> int:
+def _new_places(places, seen, measure, measurements, sizes, rejected, rejections, soft=None) -> int:
     """Measure (``measure(xy, diameter)``) each place that is not one of the ``seen`` ((xy, diameter):
     the same disc), appending to ``measurements`` the discs of the ``sizes`` (least, most) that pass the
-    measurement's tests, and counting the others in ``rejected`` and ``rejections``. Returns how many were
+    measurement's tests, and counting the others in ``rejected`` and ``rejections``; those of the sizes that
+    are soft-edged discs also in ``soft`` (where given) with their rejections. Returns how many were
     measured."""
     known = cKDTree(np.array([xy for xy, _ in seen])) if seen else None
     measured = 0
@@ -484,6 +502,8 @@ def _new_places(places, seen, measure, measurements, sizes, rejected, rejections
             rejection = Rejection.of(xy, diameter, why)
             rejected[rejection.rejected_because] += 1
             rejections.append(rejection)
+            if soft is not None and isinstance(m, Measurement) and soft_edged(m) and sizes[0] <= m.diameter_px <= sizes[1]:
+                soft.append((m, rejection))
     return measured
 
 

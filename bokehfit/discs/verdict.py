@@ -16,7 +16,10 @@ A candidate is kept as a disc when all of these hold (the rejection reasons, eac
                     ``max(EDGE_WIDTH_MIN_PX, EDGE_WIDTH_MAX_REL · r)``. A flat disc
                     blurred by b px has 2.5 b; an in-focus glint or a smooth
                     blob (Gaussian: 1.44 r) much more. Measured on the outline,
-                    it is not fooled by neighbouring discs;
+                    it is not fooled by neighbouring discs. One at most
+                    ``SOFT_EDGE_WIDTH_MAX_REL · r`` wide that passes the tests
+                    below is a soft-edged disc (:func:`soft_edged`), which the
+                    search keeps as second-tier evidence;
 ``not compact``     solidity (area over convex-hull area) below ``MIN_SOLIDITY``
                     (the star has 0.68): edges, branches, texture;
 ``in a clipped region``  saturated, and the clipping goes on past its outline
@@ -57,8 +60,8 @@ from bokehfit.discs.levels import Window, _contrast_ok, _median
 from bokehfit.discs.outlines import EDGE_WIDTH_MIN_PX, Outlined
 from bokehfit.discs.reasons import Reason
 
-__all__ = ["Measurement", "describe", "ring_all_round", "rim_above_centre", "MIN_SOLIDITY", "MAX_ELONGATION",
-           "MIN_THICKNESS_REL", "RING_DIP"]
+__all__ = ["Measurement", "describe", "ring_all_round", "rim_above_centre", "soft_edged", "light_ends", "MIN_SOLIDITY",
+           "MAX_ELONGATION", "MIN_THICKNESS_REL", "RING_DIP", "EDGE_WIDTH_MAX_REL", "SOFT_EDGE_WIDTH_MAX_REL"]
 
 #: The star, the least compact aperture, has solidity 0.68.
 MIN_SOLIDITY = 0.6
@@ -73,6 +76,21 @@ OVERLAP_DEFECT_MIN_PX = 1.0
 MAX_RING_LIFT = 0.5
 MAX_ELONGATION = 15.0
 EDGE_WIDTH_MAX_REL = 0.6
+#: A blob whose edge is wider than EDGE_WIDTH_MAX_REL of its radius but at most this, and that passes
+#: every other test of a disc, is a soft-edged disc (:func:`soft_edged`): a Gaussian blur of 0.24–0.40 of
+#: the radius, the edge of a disc whose light falls from a bright centre (spherical aberration) or of an
+#: extended light's; a glow or an in-focus blob's smooth fall (a Gaussian: 1.44) lies beyond it. Glows of
+#: 0.6–1.0 r exist too, so such a disc is second-tier evidence (:attr:`bokehfit.discs.Disc.soft_edge`).
+SOFT_EDGE_WIDTH_MAX_REL = 1.0
+#: A soft-edged disc ends (:func:`light_ends`): a disc is the aperture's image blurred, so its light is down to the
+#: ground within a blur width or so of its edge (a disc blurred by 0.4 of its radius keeps 2 % of its contrast at
+#: 1.8 radii), where a glow's tail goes on (a Gaussian's outline measured at its half level has 15 % there). The
+#: light over SOFT_TAIL_RING (radii), its quieter quarter of RING_SECTORS sectors (a neighbour lights a side, not
+#: the whole ring), above the ground (the 10th percentile over SOFT_GROUND_RING), may be at most SOFT_MAX_TAIL of
+#: the disc's contrast over that ground (the 90th percentile inside half its radius).
+SOFT_TAIL_RING = (1.6, 2.0)
+SOFT_GROUND_RING = (2.5, 3.5)
+SOFT_MAX_TAIL = 0.1
 #: Share of a disc's pixels that may be clipped in the source before it counts as saturated.
 SATURATED_SHARE = 0.002
 #: A saturated "disc" whose surrounding ring is clipped beyond this share is a
@@ -193,6 +211,41 @@ def describe(luminance, clipped_mask, found: Outlined, min_noise, min_diameter_p
         occluded=found.bridged is not None,
         thickness=thickness,
     )
+
+
+def soft_edged(m: Measurement) -> bool:
+    """Whether ``m``, refused only for its soft edge, is a soft-edged disc: its edge at most
+    SOFT_EDGE_WIDTH_MAX_REL of its radius wide, and the tests :func:`describe` makes after the edge's
+    (elongation, thickness, solidity) passed. The tests before it (size, clipping, contrast) passed, or
+    the edge would not have been the reason."""
+    return (m.reason is Reason.SOFT_EDGE
+            and m.edge_width_px <= max(EDGE_WIDTH_MIN_PX, SOFT_EDGE_WIDTH_MAX_REL * 0.5 * m.diameter_px)
+            and m.elongation <= MAX_ELONGATION and m.thickness >= MIN_THICKNESS_REL and m.solidity >= MIN_SOLIDITY)
+
+
+def light_ends(luminance: np.ndarray, m: Measurement) -> bool:
+    """Whether the light of the disc ``m`` ends near its edge, as a defocused light's does (SOFT_MAX_TAIL's note);
+    False where the frame leaves too little of the rings to tell."""
+    cx, cy = m.center_xy
+    radius = 0.5 * m.diameter_px
+    reach = int(math.ceil(SOFT_GROUND_RING[1] * radius)) + 1
+    r0, r1 = max(0, int(cy) - reach), min(luminance.shape[0], int(cy) + reach + 1)
+    c0, c1 = max(0, int(cx) - reach), min(luminance.shape[1], int(cx) + reach + 1)
+    crop = luminance[r0:r1, c0:c1]
+    rows, cols = np.mgrid[r0:r1, c0:c1]
+    rho = np.hypot(cols - cx, rows - cy) / max(radius, 1e-9)
+    ground = crop[(rho > SOFT_GROUND_RING[0]) & (rho < SOFT_GROUND_RING[1])]
+    core = crop[rho < 0.5]
+    if ground.size < 4 * RING_SECTORS or core.size == 0:
+        return False
+    sector = np.floor((np.arctan2(rows - cy, cols - cx) + math.pi) / (2.0 * math.pi) * RING_SECTORS).astype(int) % RING_SECTORS
+    ring = (rho > SOFT_TAIL_RING[0]) & (rho < SOFT_TAIL_RING[1])
+    levels = [float(np.median(crop[ring & (sector == k)])) for k in range(RING_SECTORS) if (ring & (sector == k)).sum() >= 3]
+    if len(levels) < RING_SECTORS - 2:
+        return False
+    base = float(np.percentile(ground, 10))
+    contrast = float(np.percentile(core, 90)) - base
+    return contrast > 0 and float(np.percentile(levels, 25)) - base <= SOFT_MAX_TAIL * contrast
 
 
 def _solidity(outline: np.ndarray, area: float) -> float:

@@ -151,7 +151,7 @@ def measure_colours(rgb: Callable[[slice, slice], np.ndarray] | None, chosen: Ch
     if rgb is not None and colours is None:
         why = (f"{counted(kept, 'disc')} kept ({MIN_DISCS} needed)" if kept < MIN_DISCS else
                f"fewer than {MIN_DISCS} of the {kept} discs kept are clean plateaus outlined in all three colours "
-               "(saturated, ringed and partly seen discs are not measured)")
+               "(saturated, ringed, soft-edged and partly seen discs are not measured)")
     return Colours(seen_aperture, uncertainty, colours, why)
 
 

@@ -20,7 +20,8 @@ from bokehfit.fit.crop import field_position
 from bokehfit.fit.signature import Ellipse, Screen, fit_ellipse, screen
 from bokehfit.metrics import angle_error
 
-__all__ = ["choose_discs", "no_disc_reason", "slit_aspect", "REGULAR_OUTLINE_MISFIT", "CATEYE_AXIS_DEG", "CHOICE_POOL"]
+__all__ = ["choose_discs", "no_disc_reason", "slit_aspect", "REGULAR_OUTLINE_MISFIT", "CATEYE_AXIS_DEG", "CHOICE_POOL",
+           "MIN_SHARP_DISCS"]
 
 #: A disc's outline is regular when some aperture shape (not an elongated one) fits it this well:
 #: median radial misfit in equal-area radii. Bokeh discs of a real lens show 0.01–0.05 (noise,
@@ -36,6 +37,13 @@ REGULAR_OUTLINE_MISFIT = 0.08
 CATEYE_AXIS_DEG = 20.0
 #: The discs fitted are chosen from this many times the budget (max_discs) of the clearest ones.
 CHOICE_POOL = 4
+#: Soft-edged discs (:attr:`bokehfit.discs.Disc.soft_edge`: a glow's edge can be as soft) fill the budget
+#: only where at least this many sharp discs are fitted: the shape, the consensus and the lens's features
+#: then stand on discs whose edges are a disc's, and a soft blob that is not the aperture's image is
+#: left out as a disagreeing disc is.
+MIN_SHARP_DISCS = 3
+#: The words that begin the reason a soft-edged disc is set aside for (fewer than MIN_SHARP_DISCS sharp discs).
+SOFT_SET_ASIDE = "its edge is soft, as a glow's may be: fitted only beside"
 
 
 def _order_for_fit(discs: list[Disc], max_discs: int) -> list[Disc]:
@@ -74,7 +82,25 @@ def _stretch_explained(disc: Disc, ellipse: Ellipse, others: list[Ellipse], shap
 
 def choose_discs(discs: list[Disc], families: tuple[Family, ...], max_discs: int, models: dict,
                   shape: tuple[int, int]) -> tuple[list[Disc], dict[int, str]]:
-    """The discs fitted, and those set aside with the reason.
+    """The discs fitted, and those set aside with the reason: the sharp discs first
+    (:func:`_chosen`), then, where at least MIN_SHARP_DISCS of them are fitted and the budget
+    ``max_discs`` is not full, the soft-edged ones chosen the same way to fill it; where fewer are,
+    the soft-edged discs are set aside, saying so."""
+    sharp = [d for d in discs if not d.soft_edge]
+    soft = [d for d in discs if d.soft_edge]
+    fitted, set_aside = _chosen(sharp, families, max_discs, models, shape)
+    if not soft or len(fitted) >= max_discs:
+        return fitted, set_aside
+    if len(fitted) < MIN_SHARP_DISCS:
+        why = f"{SOFT_SET_ASIDE} {MIN_SHARP_DISCS} sharp discs ({len(fitted)} here)"
+        return fitted, {**set_aside, **{d.index: why for d in soft if d.usable}}
+    more, aside = _chosen(soft, families, max_discs - len(fitted), models, shape)
+    return fitted + more, {**set_aside, **aside}
+
+
+def _chosen(discs: list[Disc], families: tuple[Family, ...], max_discs: int, models: dict,
+            shape: tuple[int, int]) -> tuple[list[Disc], dict[int, str]]:
+    """The discs fitted of ``discs``, and those set aside with the reason.
 
     A defocused light is the aperture's image: every disc shows the same outline. So a disc is
     fitted only where an aperture explains its outline (its own points) to REGULAR_OUTLINE_MISFIT
@@ -127,11 +153,13 @@ def slit_aspect(disc: Disc) -> float:
 
 def no_disc_reason(discs: list[Disc], set_aside: dict[int, str]) -> str:
     """Why no disc could be fitted: how many of ``discs`` were found, and what kept each kind out."""
+    soft = sum(why.startswith(SOFT_SET_ASIDE) for why in set_aside.values())
     flagged = {
         "cut by the frame": sum(d.clipped for d in discs),
         "under 8 px": sum(not d.resolvable for d in discs),
         "seen only in part": sum(d.outline_seen < MIN_FIT_SEEN for d in discs),
-        "with an outline no aperture shape explains": len(set_aside),
+        "with an outline no aperture shape explains": len(set_aside) - soft,
+        f"soft-edged, beside fewer than {MIN_SHARP_DISCS} sharp discs": soft,
     }
     why = ", ".join(f"{n} {what}" for what, n in flagged.items() if n)
     found = f"{len(discs)} found: {why}" if discs else "none found"

@@ -10,7 +10,9 @@ over green's, minus 1.
 
 Each fitted disc that is a clean plateau (not saturated: a clipped channel's
 half level is not its disc's, nor a ring or a bright centre, whose profiles
-differ between channels as much as their sizes) is measured in the red, green
+differ between channels as much as their sizes, nor soft-edged: its half level
+lies on a slope as wide as its radius, where a channel's profile moves its
+outline more than a lens's colour error does) is measured in the red, green
 and blue channels of the photo in linear light, as the detection measures the
 luminance (:func:`bokehfit.discs.measure.outline_diameter`: background, plateau
 and the equal-area diameter of the 50 % outline), and gives d_R/d_G − 1 and
@@ -118,7 +120,7 @@ def measure_chromatic(rgb: Callable[[slice, slice], np.ndarray], discs: Sequence
     height, width = shape
     ratios, readable = [], []
     for disc in discs:
-        if disc.evidence != "plateau" or disc.saturated or disc.profiled:
+        if disc.evidence != "plateau" or disc.saturated or disc.profiled or disc.soft_edge:
             continue
         half = int(math.ceil((1.7 + _WINDOW_REL) * 0.5 * disc.diameter_px + 6.0))
         col, row = int(round(disc.center_xy[0])), int(round(disc.center_xy[1]))

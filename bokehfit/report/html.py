@@ -22,6 +22,7 @@ from bokehfit.comparison import Comparison
 from bokehfit.uncertainty import plus_minus
 from bokehfit.words import (diameter_text, distance_text, evidence_words, fstop_text, kernel_words, place_text,
                             rejection_counts, table_candidates)
+from bokehfit.fit.choice import MIN_SHARP_DISCS
 from bokehfit.fit.disc_model import model_window
 from bokehfit.fit.features import FEATURE_DELTA_BIC
 from bokehfit.metrics import METRICS
@@ -328,6 +329,9 @@ def build_html(comparison: Comparison, command_line: str) -> str:
             ("rejected", ROLE_BGR["rejected"], "rejected: cut by the frame, too little of it its own, or too small"),
         )
     )
+    soft = sum(d.soft_edge for d in comparison.search.discs)
+    if soft:
+        legend += f"<span>dashed: soft-edged (second tier, fitted only beside {MIN_SHARP_DISCS} sharp discs) ({soft})</span>"
     if given_no_disc:
         b = ROLE_BGR["rejected"]
         legend += (f'<span class="swatch" style="background: rgb({b[2]}, {b[1]}, {b[0]})"></span>'

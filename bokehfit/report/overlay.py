@@ -2,7 +2,8 @@
 
 One vocabulary for ``discs`` and ``compare``: a disc is *usable* when it is clean
 enough to fit (resolvable, within the frame, and most of its outline its own),
-*used* when the fit actually used it (``compare`` only), and *rejected* otherwise.
+*used* when the fit actually used it (``compare`` only), and *rejected* otherwise. A soft-edged disc
+(:attr:`bokehfit.discs.Disc.soft_edge`, the search's second tier) is outlined in dashes.
 """
 
 from __future__ import annotations
@@ -25,6 +26,8 @@ ROLE_BGR = {"used": USED_BGR, "usable": USABLE_BGR, "rejected": FLAGGED_BGR}
 LABEL_HEIGHT_REL = 0.009
 #: Sub-pixel precision of the drawn outlines (OpenCV fixed-point shift).
 _SHIFT = 4
+#: A soft-edged disc's outline: dashes and gaps of this many line widths each.
+DASH_WIDTHS = 4
 
 
 def disc_role(disc: Disc, used: set[int] | None = None) -> str:
@@ -86,7 +89,11 @@ def draw_disc_overlay(
         colour = ROLE_BGR[disc_role(disc, used)]
         outline = (disc.outline_xy + 0.5) * scale - 0.5
         points = np.round((outline + 0.5) * (1 << _SHIFT)).astype(np.int32)
-        cv2.polylines(canvas, [points], True, colour, thickness, cv2.LINE_AA, shift=_SHIFT)
+        if disc.soft_edge:
+            cv2.polylines(canvas, _dashes(outline, DASH_WIDTHS * thickness), False, colour, thickness, cv2.LINE_AA,
+                          shift=_SHIFT)
+        else:
+            cv2.polylines(canvas, [points], True, colour, thickness, cv2.LINE_AA, shift=_SHIFT)
         # Hershey fonts are ASCII; the longer label where it overlaps no other, else the index alone
         texts = [f"{disc.index}: {labels[disc.index]}", str(disc.index)] if disc.index in labels else [str(disc.index)]
         for k, text in enumerate(texts):
@@ -98,6 +105,23 @@ def draw_disc_overlay(
         cv2.putText(canvas, text, (x, y), cv2.FONT_HERSHEY_SIMPLEX, font_scale, (0, 0, 0), 3 * thickness, cv2.LINE_AA)
         cv2.putText(canvas, text, (x, y), cv2.FONT_HERSHEY_SIMPLEX, font_scale, colour, thickness, cv2.LINE_AA)
     return canvas
+
+
+def _dashes(outline: np.ndarray, dash_px: float) -> list[np.ndarray]:
+    """The closed ``outline`` (canvas pixels) cut into pieces ``dash_px`` long with gaps as long between them,
+    as OpenCV's fixed-point polylines."""
+    closed = np.vstack([outline, outline[:1]])
+    along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(closed, axis=0).T))])
+    on = (np.floor(along / max(dash_px, 1.0)).astype(int) % 2) == 0
+    pieces, start = [], None
+    for i, inside in enumerate(on):
+        if inside and start is None:
+            start = i
+        if (not inside or i == len(on) - 1) and start is not None:
+            if i > start:
+                pieces.append(np.round((closed[start : i + 1] + 0.5) * (1 << _SHIFT)).astype(np.int32))
+            start = None
+    return pieces or [np.round((closed + 0.5) * (1 << _SHIFT)).astype(np.int32)]
 
 
 def _label_spot(text, outline, font_scale, thickness, placed, width, height, *, last):
