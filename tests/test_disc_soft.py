@@ -69,6 +69,9 @@ def test_soft_discs_are_found_as_the_second_tier_and_a_glow_is_not(seed):
         assert len(found) == 1 and found[0].usable and found[0].soft_edge, (centre, search.rejected)
         assert found[0].diameter_px == pytest.approx(2 * RADIUS, rel=0.1)
         assert found[0].to_json(outline=False)["soft_edge"] is True
+        # kept, so not listed as refused: neither its measurement nor another of the same disc
+        assert not [r for r in search.rejections if r.rejected_because == "soft edge"
+                    and math.dist(r.center_xy, found[0].center_xy) < 0.25 * found[0].diameter_px], centre
     assert not _at(search.discs, GLOW), [(d.center_xy, d.diameter_px) for d in search.discs]
 
 

@@ -268,14 +268,20 @@ def _discs_of(measurements, found, rejected, start, notes, rejections, max_discs
         discs += _made(kept, clusters, soft_edge=True)
         discs.sort(key=lambda d: -d.diameter_px)  # stable: the sharp discs keep their order
         discs = [replace(d, index=i) for i, d in enumerate(discs)][:max_discs]
-        taken = {id(m) for m in kept}
-        dropped = {id(r) for m, r in soft if id(m) in taken}
+        # A soft disc's rejection leaves the lists, and so do those of its other measurements (the same disc).
+        dropped = {id(r) for m, r in soft if any(_same_disc(m, k) for k in kept)}
         rejected = rejected.copy()
-        for m, r in soft:
-            if id(m) in taken:
+        for _, r in soft:
+            if id(r) in dropped:
                 rejected[r.rejected_because] -= 1
         rejections = [r for r in rejections if id(r) not in dropped]
     return DiscSearch(discs, found, +rejected, time.perf_counter() - start, tuple(notes), tuple(rejections), given)
+
+
+def _same_disc(m: Measurement, other: Measurement) -> bool:
+    """Two measurements of one disc: centres within SAME_DISC_CENTRE_REL of the diameter, sizes alike (:func:`_same_size`)."""
+    return m is other or (math.dist(m.center_xy, other.center_xy) <= SAME_DISC_CENTRE_REL * other.diameter_px
+                          and _same_size(m.diameter_px, other.diameter_px))
 
 
 def _made(measurements: list[Measurement], first_cluster: int = 0, soft_edge: bool = False) -> list[Disc]:
