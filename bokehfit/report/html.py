@@ -331,7 +331,9 @@ def build_html(comparison: Comparison, command_line: str) -> str:
     )
     soft = sum(d.soft_edge for d in comparison.search.discs)
     if soft:
-        legend += f"<span>dashed: soft-edged (second tier, fitted only beside {MIN_SHARP_DISCS} sharp discs) ({soft})</span>"
+        b = ROLE_BGR["usable"]
+        legend += (f'<span class="swatch" style="background: none; border: 2px dashed rgb({b[2]}, {b[1]}, {b[0]})">'
+                   f"</span>dashed: soft-edged, the second tier (fitted only beside {MIN_SHARP_DISCS} sharp discs) ({soft})")
     if given_no_disc:
         b = ROLE_BGR["rejected"]
         legend += (f'<span class="swatch" style="background: rgb({b[2]}, {b[1]}, {b[0]})"></span>'
