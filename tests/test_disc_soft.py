@@ -126,3 +126,19 @@ def test_a_wide_glow_on_a_lit_ground_is_told_by_its_tail(sigma, monkeypatch):
     assert not [d for d in find_discs(image, min_diameter_px=8).discs if d.usable]
     monkeypatch.setattr(search_module, "light_ends", lambda luminance, m: True)
     assert [d.soft_edge for d in find_discs(image, min_diameter_px=8).discs if d.usable] == [True]
+
+
+def test_a_soft_edged_disc_is_outlined_in_dashes():
+    """The overlay draws a soft-edged disc's outline in dashes and gaps of about equal length, a sharp one whole."""
+    from dataclasses import replace
+
+    from bokehfit.report.overlay import draw_disc_overlay
+
+    sharp = next(d for d in find_discs(_photo(glow=False), min_diameter_px=8).discs if not d.soft_edge)
+    rows, cols = np.indices((240, 420))
+    ring = np.abs(np.hypot(cols - sharp.center_xy[0], rows - sharp.center_xy[1]) - 0.5 * sharp.diameter_px) < 2.5
+    drawn = {}
+    for soft in (False, True):
+        canvas = draw_disc_overlay(np.zeros((240, 420, 3), dtype=np.uint8), [replace(sharp, soft_edge=soft)])
+        drawn[soft] = int((canvas[ring].max(axis=-1) > 100).sum())
+    assert 0.3 * drawn[False] < drawn[True] < 0.7 * drawn[False], drawn

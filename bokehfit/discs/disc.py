@@ -329,22 +329,31 @@ def _clear_of(sharp: list[Measurement], soft: list[Measurement]) -> list[Measure
     """The soft-edged measurements, largest first, whose outlines lie clear of every sharp disc's (none of their
     points within OVERLAP_MARGIN_PX of one, and none of the sharp disc's inside theirs): a soft blob against a
     sharp disc is its light or its neighbour's glow, and the sharp disc already says what that place shows."""
-    if not soft:
-        return []
-    if not sharp:
-        return sorted(soft, key=lambda m: -m.diameter_px)
-    centres = np.array([m.center_xy for m in sharp])
-    reach = np.array([np.max(np.hypot(*(m.outline_xy - m.center_xy).T)) for m in sharp])
-    tree = cKDTree(centres)
-    clear = []
-    for m in soft:
-        own_reach = float(np.max(np.hypot(*(m.outline_xy - m.center_xy).T)))
-        near = [j for j in tree.query_ball_point(m.center_xy, own_reach + reach.max() + OVERLAP_MARGIN_PX)
-                if np.hypot(*(centres[j] - m.center_xy)) <= own_reach + reach[j] + OVERLAP_MARGIN_PX]
-        if not any(_within_outline(m.outline_xy, sharp[j].outline_xy, OVERLAP_MARGIN_PX).any()
-                   or _within_outline(sharp[j].outline_xy, m.outline_xy, OVERLAP_MARGIN_PX).any() for j in near):
-            clear.append(m)
+    extents = _Extents(sharp) if sharp else None
+    clear = [m for m in soft if extents is None or not any(
+        _within_outline(m.outline_xy, sharp[j].outline_xy, OVERLAP_MARGIN_PX).any()
+        or _within_outline(sharp[j].outline_xy, m.outline_xy, OVERLAP_MARGIN_PX).any() for j in extents.near(m))]
     return sorted(clear, key=lambda m: -m.diameter_px)
+
+
+def _reach(m: Measurement) -> float:
+    """How far the measurement's outline reaches from its centre."""
+    return float(np.max(np.hypot(*(m.outline_xy - m.center_xy).T)))
+
+
+class _Extents:
+    """Measurements' centres and reaches, asked which of them may touch an outline (within OVERLAP_MARGIN_PX)."""
+
+    def __init__(self, measurements: list[Measurement]):
+        self.centres = np.array([m.center_xy for m in measurements])
+        self.reach = np.array([_reach(m) for m in measurements])
+        self._tree = cKDTree(self.centres)
+
+    def near(self, m: Measurement, reach: float | None = None) -> list[int]:
+        """The indices of those whose extent comes within OVERLAP_MARGIN_PX of ``m``'s (its reach ``reach``)."""
+        reach = _reach(m) if reach is None else reach
+        return [j for j in self._tree.query_ball_point(m.center_xy, reach + self.reach.max() + OVERLAP_MARGIN_PX)
+                if np.hypot(*(self.centres[j] - m.center_xy)) <= reach + self.reach[j] + OVERLAP_MARGIN_PX]
 
 
 def _flag_neighbours(measurements: list[Measurement]) -> list[bool]:
@@ -352,7 +361,7 @@ def _flag_neighbours(measurements: list[Measurement]) -> list[bool]:
     if len(measurements) < 2:
         return [m.overlaps for m in measurements]
     centres = np.array([m.center_xy for m in measurements])
-    reach = np.array([np.max(np.hypot(*(m.outline_xy - m.center_xy).T)) for m in measurements])
+    reach = np.array([_reach(m) for m in measurements])
     tree = cKDTree(centres)
     flags = []
     for i, m in enumerate(measurements):
@@ -385,12 +394,10 @@ def _own_outlines(measurements: list[Measurement]) -> tuple[list[np.ndarray], li
         return i
 
     if len(measurements) >= 2:
-        centres = np.array([m.center_xy for m in measurements])
-        reach = np.array([np.max(np.hypot(*(m.outline_xy - m.center_xy).T)) for m in measurements])
-        tree = cKDTree(centres)
+        extents = _Extents(measurements)
         for i, m in enumerate(measurements):
-            for j in tree.query_ball_point(m.center_xy, reach[i] + reach.max() + OVERLAP_MARGIN_PX):
-                if j == i or np.hypot(*(centres[j] - centres[i])) > reach[i] + reach[j] + OVERLAP_MARGIN_PX:
+            for j in extents.near(m, extents.reach[i]):
+                if j == i:
                     continue
                 inside = _within_outline(m.outline_xy, measurements[j].outline_xy, OVERLAP_MARGIN_PX)
                 if inside.any():

@@ -184,12 +184,8 @@ def describe(luminance, clipped_mask, found: Outlined, min_noise, min_diameter_p
         reason = Reason.FAINT
     elif edge_width > max(EDGE_WIDTH_MIN_PX, EDGE_WIDTH_MAX_REL * 0.5 * diameter) and not clipping.saturated:
         reason = Reason.SOFT_EDGE
-    elif elongation > MAX_ELONGATION:
-        reason = Reason.ELONGATED
-    elif thickness < MIN_THICKNESS_REL:
-        reason = Reason.LINE_LIKE
-    elif solidity < MIN_SOLIDITY:
-        reason = Reason.NOT_COMPACT
+    else:
+        reason = _shape_reason(elongation, thickness, solidity)
     return Measurement(
         center_xy=(cx + window.c0, cy + window.r0),
         diameter_px=diameter,
@@ -213,39 +209,43 @@ def describe(luminance, clipped_mask, found: Outlined, min_noise, min_diameter_p
     )
 
 
+def _shape_reason(elongation: float, thickness: float, solidity: float) -> Reason | None:
+    """The tests of a disc's shape, the last :func:`describe` makes: the first failed, or None."""
+    if elongation > MAX_ELONGATION:
+        return Reason.ELONGATED
+    if thickness < MIN_THICKNESS_REL:
+        return Reason.LINE_LIKE
+    if solidity < MIN_SOLIDITY:
+        return Reason.NOT_COMPACT
+    return None
+
+
 def soft_edged(m: Measurement) -> bool:
     """Whether ``m``, refused only for its soft edge, is a soft-edged disc: its edge at most
-    SOFT_EDGE_WIDTH_MAX_REL of its radius wide, and the tests :func:`describe` makes after the edge's
-    (elongation, thickness, solidity) passed. The tests before it (size, clipping, contrast) passed, or
+    SOFT_EDGE_WIDTH_MAX_REL of its radius wide, and the tests of its shape that :func:`describe` makes after
+    the edge's passed (:func:`_shape_reason`). The tests before it (size, clipping, contrast) passed, or
     the edge would not have been the reason."""
     return (m.reason is Reason.SOFT_EDGE
             and m.edge_width_px <= max(EDGE_WIDTH_MIN_PX, SOFT_EDGE_WIDTH_MAX_REL * 0.5 * m.diameter_px)
-            and m.elongation <= MAX_ELONGATION and m.thickness >= MIN_THICKNESS_REL and m.solidity >= MIN_SOLIDITY)
+            and _shape_reason(m.elongation, m.thickness, m.solidity) is None)
 
 
 def light_ends(luminance: np.ndarray, m: Measurement) -> bool:
     """Whether the light of the disc ``m`` ends near its edge, as a defocused light's does (SOFT_MAX_TAIL's note);
     False where the frame leaves too little of the rings to tell."""
-    cx, cy = m.center_xy
     radius = 0.5 * m.diameter_px
-    reach = int(math.ceil(SOFT_GROUND_RING[1] * radius)) + 1
-    r0, r1 = max(0, int(cy) - reach), min(luminance.shape[0], int(cy) + reach + 1)
-    c0, c1 = max(0, int(cx) - reach), min(luminance.shape[1], int(cx) + reach + 1)
-    crop = luminance[r0:r1, c0:c1]
-    rows, cols = np.mgrid[r0:r1, c0:c1]
-    rho = np.hypot(cols - cx, rows - cy) / max(radius, 1e-9)
-    ground = crop[(rho > SOFT_GROUND_RING[0]) & (rho < SOFT_GROUND_RING[1])]
-    core = crop[rho < 0.5]
-    if ground.size < 4 * RING_SECTORS or core.size == 0:
-        return False
-    sector = np.floor((np.arctan2(rows - cy, cols - cx) + math.pi) / (2.0 * math.pi) * RING_SECTORS).astype(int) % RING_SECTORS
-    ring = (rho > SOFT_TAIL_RING[0]) & (rho < SOFT_TAIL_RING[1])
-    levels = [float(np.median(crop[ring & (sector == k)])) for k in range(RING_SECTORS) if (ring & (sector == k)).sum() >= 3]
-    if len(levels) < RING_SECTORS - 2:
+    window = Window.around(luminance.shape, m.center_xy, int(math.ceil(SOFT_GROUND_RING[1] * radius)) + 1)
+    crop = window.of(luminance)
+    cx, cy = m.center_xy[0] - window.c0, m.center_xy[1] - window.r0
+    rho = _window_distance(crop.shape, cx, cy) / max(radius, 1e-9)
+    ground, core = crop[(rho > SOFT_GROUND_RING[0]) & (rho < SOFT_GROUND_RING[1])], crop[rho < 0.5]
+    rows, cols = np.nonzero((rho > SOFT_TAIL_RING[0]) & (rho < SOFT_TAIL_RING[1]))
+    tail = _sector_medians(crop, rows, cols, cx, cy, least=3)
+    if ground.size < 4 * RING_SECTORS or not core.size or len(tail) < RING_SECTORS - 2:
         return False
     base = float(np.percentile(ground, 10))
     contrast = float(np.percentile(core, 90)) - base
-    return contrast > 0 and float(np.percentile(levels, 25)) - base <= SOFT_MAX_TAIL * contrast
+    return contrast > 0 and float(np.percentile(tail, 25)) - base <= SOFT_MAX_TAIL * contrast
 
 
 def _solidity(outline: np.ndarray, area: float) -> float:
@@ -327,11 +327,18 @@ def rim_above_centre(luminance: np.ndarray, center_xy, diameter: float, lift: fl
     centre, rows, cols = _centre_and_rim(crop, cx, cy, diameter)
     if not centre.size or not rows.size:
         return False
+    above = lift + float(_median(centre))
+    return sum(level > above for level in _sector_medians(crop, rows, cols, cx, cy)) > RING_SECTORS / 2
+
+
+def _sector_medians(crop: np.ndarray, rows: np.ndarray, cols: np.ndarray, cx: float, cy: float,
+                    least: int = 1) -> list[float]:
+    """The median of the pixels (``rows``, ``cols``) of ``crop`` in each of RING_SECTORS sectors around (cx, cy)
+    that holds at least ``least`` of them."""
     turn = (np.arctan2(rows - cy, cols - cx) + math.pi) / (2.0 * math.pi)
     sector = np.floor(turn * RING_SECTORS).astype(int) % RING_SECTORS
-    values, above = crop[rows, cols], lift + float(_median(centre))
-    lifted = sum(float(_median(values[sector == k])) > above for k in range(RING_SECTORS) if (sector == k).any())
-    return lifted > RING_SECTORS / 2
+    values = crop[rows, cols]
+    return [float(_median(values[sector == k])) for k in range(RING_SECTORS) if (sector == k).sum() >= least]
 
 
 def _overlaps(found: Outlined, diameter: float, contrast: float) -> bool:

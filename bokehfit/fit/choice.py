@@ -42,8 +42,6 @@ CHOICE_POOL = 4
 #: then stand on discs whose edges are a disc's, and a soft blob that is not the aperture's image is
 #: left out as a disagreeing disc is.
 MIN_SHARP_DISCS = 3
-#: The words that begin the reason a soft-edged disc is set aside for (fewer than MIN_SHARP_DISCS sharp discs).
-SOFT_SET_ASIDE = "its edge is soft, as a glow's may be: fitted only beside"
 
 
 def _order_for_fit(discs: list[Disc], max_discs: int) -> list[Disc]:
@@ -92,7 +90,7 @@ def choose_discs(discs: list[Disc], families: tuple[Family, ...], max_discs: int
     if not soft or len(fitted) >= max_discs:
         return fitted, set_aside
     if len(fitted) < MIN_SHARP_DISCS:
-        why = f"{SOFT_SET_ASIDE} {MIN_SHARP_DISCS} sharp discs ({len(fitted)} here)"
+        why = f"its edge is soft, as a glow's may be: fitted only beside {MIN_SHARP_DISCS} sharp discs ({len(fitted)} here)"
         return fitted, {**set_aside, **{d.index: why for d in soft if d.usable}}
     more, aside = _chosen(soft, families, max_discs - len(fitted), models, shape)
     return fitted + more, {**set_aside, **aside}
@@ -153,7 +151,7 @@ def slit_aspect(disc: Disc) -> float:
 
 def no_disc_reason(discs: list[Disc], set_aside: dict[int, str]) -> str:
     """Why no disc could be fitted: how many of ``discs`` were found, and what kept each kind out."""
-    soft = sum(why.startswith(SOFT_SET_ASIDE) for why in set_aside.values())
+    soft = sum(d.soft_edge and d.index in set_aside for d in discs)  # none fitted: fewer than MIN_SHARP_DISCS sharp
     flagged = {
         "cut by the frame": sum(d.clipped for d in discs),
         "under 8 px": sum(not d.resolvable for d in discs),

@@ -112,16 +112,10 @@ def _dashes(outline: np.ndarray, dash_px: float) -> list[np.ndarray]:
     as OpenCV's fixed-point polylines."""
     closed = np.vstack([outline, outline[:1]])
     along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(closed, axis=0).T))])
-    on = (np.floor(along / max(dash_px, 1.0)).astype(int) % 2) == 0
-    pieces, start = [], None
-    for i, inside in enumerate(on):
-        if inside and start is None:
-            start = i
-        if (not inside or i == len(on) - 1) and start is not None:
-            if i > start:
-                pieces.append(np.round((closed[start : i + 1] + 0.5) * (1 << _SHIFT)).astype(np.int32))
-            start = None
-    return pieces or [np.round((closed + 0.5) * (1 << _SHIFT)).astype(np.int32)]
+    dash = np.floor(along / max(dash_px, 1.0)).astype(int)
+    fixed = np.round((closed + 0.5) * (1 << _SHIFT)).astype(np.int32)
+    pieces = [fixed[dash == k] for k in np.unique(dash) if k % 2 == 0]
+    return [piece for piece in pieces if len(piece) >= 2] or [fixed]
 
 
 def _label_spot(text, outline, font_scale, thickness, placed, width, height, *, last):
