@@ -382,3 +382,37 @@ def test_usage_errors_exit_2_on_one_line(tmp_path, args, needle):
     done, _ = bokehfit_cli("compare", PHOTO, "--no-html", *args, cwd=tmp_path)
     assert done.returncode == 2, done.stdout + done.stderr
     assert needle in one_line(done.stderr)
+
+
+def test_reader_that_leaves_early_loses_no_file(tmp_path):
+    """``bokehfit compare photo --out-dir D | head -1``: the reader closes the pipe after the summary's first
+    line, and the run still writes its JSON and its report and ends with its own exit code."""
+    env = {k: v for k, v in os.environ.items() if k != "XDG_RUNTIME_DIR"}
+    run = subprocess.Popen([sys.executable, "-m", "bokehfit", "compare", str(PHOTO), "--out-dir", "out"],
+                           cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    first = run.stdout.readline()
+    run.stdout.close()  # the reader leaves, as head -1 does
+    try:
+        _, stderr = run.communicate(timeout=600)
+    finally:
+        run.kill()
+    assert first.decode().startswith("Sure: hexagon"), first
+    assert run.returncode == 0, stderr.decode()
+    assert stderr.decode().strip() == ""
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["hexagon_85mm_f2.html", "hexagon_85mm_f2.json"]
+    assert strict_json(tmp_path / "out" / "hexagon_85mm_f2.json")["status"] == "fitted"
+    assert (tmp_path / "out" / "hexagon_85mm_f2.html").read_text(encoding="utf-8").rstrip().endswith("</html>")
+
+
+def test_console_guard_sends_the_rest_to_the_null_device():
+    """:class:`ReaderMayLeave` on a pipe whose reader has gone: the write goes on, to the null device."""
+    from bokehfit.cli.console import ReaderMayLeave
+
+    read_end, write_end = os.pipe()
+    os.close(read_end)
+    with open(write_end, "w", buffering=1, encoding="utf-8") as stream:
+        guard = ReaderMayLeave(stream)
+        assert guard.write("a line\n") == len("a line\n")
+        guard.flush()
+        assert guard.reader_left
+        assert os.path.samestat(os.fstat(stream.fileno()), os.stat(os.devnull))

@@ -24,6 +24,7 @@ from collections.abc import Mapping, Sequence
 
 from bokehfit import __version__
 from bokehfit.cli import bench, compare, discs, kernel, render, similarity, survey, view
+from bokehfit.cli.console import reader_may_leave
 from bokehfit.errors import BokehfitError, InputError
 from bokehfit.gpu import BACKENDS, AdapterChoice
 from bokehfit.threads import one_thread
@@ -115,10 +116,13 @@ def entry_point() -> None:
     Warnings are printed as one line while the command runs; the process's
     warning handler and filters are restored afterwards (also on exit). BLAS and
     OpenMP run on one thread meanwhile, unless the environment sizes them
-    (:func:`bokehfit.threads.one_thread`).
+    (:func:`bokehfit.threads.one_thread`). A reader that closes stdout early
+    (``| head -1``) does not stop the run: the rest of what it prints goes to
+    the null device and its files are still written
+    (:func:`bokehfit.cli.console.reader_may_leave`).
     """
     _unencodable_text_escaped()
-    with warnings.catch_warnings(), one_thread():
+    with warnings.catch_warnings(), one_thread(), reader_may_leave():
         warnings.showwarning = _show_warning_one_line
         _run_with_exit_codes()
 
