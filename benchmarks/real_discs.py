@@ -3,7 +3,7 @@
 Usage::
 
     BOKEHFIT_REFERENCE_DIR=path/to/reference_photos python benchmarks/real_discs.py [--json out.json] [--only 04 09]
-        [--no-person] [--finder-only] [--at-places]
+        [--no-person] [--finder-only] [--at-places] [--sheets DIR]
 
 For every photo of ``reference_photos/manifest.json`` that has a person's
 labels (``$BOKEHFIT_REFERENCE_DIR/discs/NAME.discs.json``, same sha256), it
@@ -30,6 +30,12 @@ as ``compare``'s, and "used" then counts what the search offers the fit (its
 junk before the fit's consensus sets any aside), with the search's CPU time.
 It takes a fraction of the time of the whole run, for trying a change to the search.
 
+``--sheets DIR`` also writes, per photo, a contact sheet (``DIR/NAME.sheet.png``) of what the table counts
+against the finder: each disc the fit used that is not a labelled disc, and each labelled usable disc missed
+with why, a tile each, with the search's outlines (red: used, yellow: usable, grey: not usable) and the
+label's circle (green): a miss is read in seconds where its numbers take minutes. The sheets show the photos:
+keep them out of the repository (their licences, ``reference_photos/MANIFEST.md``).
+
 ``--at-places`` measures each labelled usable disc and each labelled non-disc at its own place and
 size, as the search measures a place, and counts those that pass its tests of a disc: whether a miss
 is the search not finding a place, or its tests not telling a disc from a bright blob there.
@@ -39,6 +45,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 import time
@@ -75,27 +82,81 @@ def score_comparison(comparison, labels: DiscLabels) -> DiscScore:
 
 
 def why_missed(comparison, score: DiscScore) -> Counter:
-    """Why each labelled usable disc was not found usable: found but not usable (the disc's problems),
-    found at its place with another size, a candidate measured and rejected there (the reason), or
-    no candidate at all."""
+    """Why the labelled usable discs were not found usable, counted (:func:`why_each`)."""
+    return Counter(why for _, why in why_each(comparison, score))
+
+
+def why_each(comparison, score: DiscScore) -> list:
+    """(label, why) for each labelled usable disc not found usable: found but not usable (the disc's
+    problems), found at its place with another size, a candidate measured and rejected there (the
+    reason), or no candidate at all."""
     from bokehfit.discs.labels import at_place, matches
     from bokehfit.words import disc_problems
 
-    reasons = Counter()
+    reasons = []
     for label in score.missed:
         found = [d for d in comparison.search.discs if matches(d.center_xy, d.diameter_px, label)]
         placed = [d for d in comparison.search.discs if at_place(d.center_xy, label)]
         rejected = [r for r in comparison.search.rejections if at_place(r.center_xy, label)]
         if found:
-            reasons["found, not usable: " + ", ".join(disc_problems(found[0])).split(" (")[0]] += 1
+            why = "found, not usable: " + ", ".join(disc_problems(found[0])).split(" (")[0]
         elif placed:
             ratio = placed[0].diameter_px / label.diameter_px
-            reasons[f"found {'larger' if ratio > 1 else 'smaller'} ({label.kind})"] += 1
+            why = f"found {'larger' if ratio > 1 else 'smaller'} ({label.kind})"
         elif rejected:
-            reasons[f"rejected: {rejected[0].rejected_because.split(' (')[0]} ({label.kind})"] += 1
+            why = f"rejected: {rejected[0].rejected_because.split(' (')[0]} ({label.kind})"
         else:
-            reasons[f"no candidate ({label.kind})"] += 1
+            why = f"no candidate ({label.kind})"
+        reasons.append((label, why))
     return reasons
+
+
+#: A contact sheet's tiles: their side (px), how many a row, and the most a sheet shows.
+TILE_PX, TILES_A_ROW, MOST_TILES = 220, 6, 48
+
+
+def write_sheet(comparison, score: DiscScore, path: Path) -> int:
+    """A contact sheet (PNG) of what to look at on one photo: each disc the fit used that is not a labelled
+    disc (what the score calls it) and each labelled usable disc missed (why), a tile each, with every disc
+    the search found outlined (red: used by the fit, yellow: usable, grey: not usable) and the label's circle
+    in green. Returns how many tiles it shows; writes nothing where there are none."""
+    import cv2
+    import numpy as np
+
+    from bokehfit.outputs import write_bytes_atomic
+
+    items = [((xy, size), f"used {what}") for xy, size, what in score.junk_used]
+    items += [((label.center_xy, label.diameter_px), why) for label, why in why_each(comparison, score)]
+    items = items[:MOST_TILES]
+    if not items:
+        return 0
+    photo = cv2.cvtColor(np.ascontiguousarray(comparison.photo.display), cv2.COLOR_RGB2BGR)
+    used = {d.index for d in comparison.used_discs}
+    tiles = []
+    for ((x, y), size), caption in items:
+        half = max(24, int(math.ceil(1.2 * size)))
+        scale = TILE_PX / (2 * half)
+        padded = cv2.copyMakeBorder(photo, half, half, half, half, cv2.BORDER_CONSTANT)
+        x0, y0 = int(round(x)) - half, int(round(y)) - half
+        tile = cv2.resize(padded[y0 + half : y0 + 3 * half, x0 + half : x0 + 3 * half], (TILE_PX, TILE_PX),
+                          interpolation=cv2.INTER_AREA if scale < 1 else cv2.INTER_LINEAR)
+        for disc in comparison.search.discs:
+            colour = (0, 0, 255) if disc.index in used else (0, 220, 255) if disc.usable else (160, 160, 160)
+            points = np.round((disc.outline_xy - [x0, y0]) * scale).astype(np.int32)
+            cv2.polylines(tile, [points], True, colour, 1, cv2.LINE_AA)
+        if not caption.startswith("used"):
+            cv2.circle(tile, (TILE_PX // 2, TILE_PX // 2), int(round(0.5 * size * scale)), (0, 200, 0), 1, cv2.LINE_AA)
+        for text, at in ((f"({x:.0f}, {y:.0f}) {size:.0f} px", 0), (caption[:44], TILE_PX - 16)):
+            cv2.rectangle(tile, (0, at), (TILE_PX - 1, at + 15), (0, 0, 0), cv2.FILLED)
+            cv2.putText(tile, text, (3, at + 11), cv2.FONT_HERSHEY_SIMPLEX, 0.36, (255, 255, 255), 1, cv2.LINE_AA)
+        tiles.append(tile)
+    tiles += [np.zeros_like(tiles[0])] * (-len(tiles) % TILES_A_ROW)
+    sheet = np.vstack([np.hstack(tiles[i : i + TILES_A_ROW]) for i in range(0, len(tiles), TILES_A_ROW)])
+    ok, data = cv2.imencode(".png", sheet)
+    if not ok:
+        raise OSError(f"could not encode {path.name}")
+    write_bytes_atomic(path, data.tobytes())
+    return len(items)
 
 
 def row(comparison, label: dict, seconds: float) -> dict:
@@ -197,6 +258,9 @@ def main(argv=None) -> int:
     parser.add_argument("--no-person", action="store_true", help="skip the fit on the person's discs")
     parser.add_argument("--finder-only", action="store_true",
                         help="run the disc search alone and score all the discs it finds usable")
+    parser.add_argument("--sheets", type=Path, metavar="DIR",
+                        help="write a contact sheet per photo into DIR: the used discs that are not labelled discs and"
+                             " the labelled discs missed, each outlined (not for committing: the photos' licences)")
     parser.add_argument("--at-places", action="store_true",
                         help="measure each labelled disc and non-disc at its own place: how many pass as discs")
     args = parser.parse_args(argv)
@@ -231,6 +295,11 @@ def main(argv=None) -> int:
             print(f"                 missed {n} × {why}")
         for xy, size, what in score.junk_used[:6]:
             print(f"                 used {what}: ({xy[0]:.0f}, {xy[1]:.0f}) {size:.0f} px")
+        if args.sheets is not None:
+            args.sheets.mkdir(parents=True, exist_ok=True)
+            sheet = args.sheets / f"{Path(entry['file']).stem}.sheet.png"
+            if write_sheet(comparison, score, sheet):
+                print(f"                 sheet: {sheet}")
         result = {"file": entry["file"], "label": entry["label"], "own": own, "score": figures}
         if not args.no_person and labels.usable:
             start = time.perf_counter()

@@ -69,3 +69,39 @@ def test_06_the_persons_discs_give_the_round_aperture(reference_photo, gpu):
     assert comparison.fit.aperture.is_circle, comparison.fit.message
     used = _places(comparison.used_discs)
     assert used and score_discs(labels, [], used).used_as["disc"] == len(used)
+
+
+def _real_discs_module():
+    """``benchmarks/real_discs.py`` as a module (the benchmarks are scripts, not a package)."""
+    import importlib.util
+    import sys
+
+    root = Path(__file__).resolve().parents[1]
+    sys.path.insert(0, str(root / "benchmarks"))  # it imports its neighbour real_photos
+    try:
+        spec = importlib.util.spec_from_file_location("real_discs", root / "benchmarks" / "real_discs.py")
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+    finally:
+        sys.path.remove(str(root / "benchmarks"))
+    return module
+
+
+def test_contact_sheet_shows_every_used_non_disc_and_every_miss(compared, tmp_path):
+    """``real_discs.py --sheets``: a tile for each used disc that is not a labelled disc and each labelled disc
+    missed (photo 01 has both), in rows of TILES_A_ROW, written as a PNG that decodes to that size."""
+    import cv2
+
+    real_discs = _real_discs_module()
+    name = "01_water-glints_canon6d_ef85.jpg"
+    _, labels = labels_of(name)
+    comparison = compared(name)
+    score = score_discs(labels, _places(comparison.usable_discs), _places(comparison.used_discs))
+    assert score.junk_used and score.missed
+    tiles = min(len(score.junk_used) + len(score.missed), real_discs.MOST_TILES)
+    path = tmp_path / "01.sheet.png"
+    assert real_discs.write_sheet(comparison, score, path) == tiles
+    sheet = cv2.imread(str(path))
+    rows = -(-tiles // real_discs.TILES_A_ROW)
+    assert sheet.shape == (rows * real_discs.TILE_PX, real_discs.TILES_A_ROW * real_discs.TILE_PX, 3)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["01.sheet.png"]  # written atomically, nothing left over
