@@ -35,7 +35,9 @@ REGULAR_OUTLINE_MISFIT = 0.08
 #: the cat-eye's: a disc at least VIGNETTING_MIN_FIELD from the centre whose long axis lies within
 #: CATEYE_AXIS_DEG of square to the line from the centre (the barrel cuts the side away from it).
 CATEYE_AXIS_DEG = 20.0
-#: The discs fitted are chosen from this many times the budget (max_discs) of the clearest ones.
+#: The discs fitted are chosen from this many times the budget (max_discs) of the clearest ones; where none of
+#: those is an aperture's image (a window of in-focus raindrops, a carpet of glints), from all of them: what
+#: outshines a photo's discs need not be its discs, and the reason for no fit then speaks for every disc found.
 CHOICE_POOL = 4
 #: Soft-edged discs (:attr:`bokehfit.discs.Disc.soft_edge`: a glow's edge can be as soft) fill the budget
 #: only where at least this many sharp discs are fitted: the shape, the consensus and the lens's features
@@ -106,18 +108,21 @@ def _chosen(discs: list[Disc], families: tuple[Family, ...], max_discs: int, mod
     at the frame's edge (:func:`_stretch_explained`). Lit leaves and petals, in-focus highlights,
     patches of sky between branches, discs cut by a blade and glows run together are not, and are
     set aside with the reason, whatever their clarity. They are chosen from the CHOICE_POOL ·
-    ``max_discs`` clearest (:func:`_order_for_fit`): discs on their own before those beside other
+    ``max_discs`` clearest (:func:`_order_for_fit`), or from all where none of those is fitted (CHOICE_POOL's
+    note): discs on their own before those beside other
     light, shapes that are not elongated before elongated ones, each group in that order. The
     straight families suffice (a rounded polygon lies between its straight one and the circle) and
     keep the screen cheap; all of them, whatever shapes the fit tries. ``models`` is the fit's memo of
     model signatures (:func:`~bokehfit.fit.signature.screen`); ``shape`` the photo's (rows, columns)."""
-    pool = _order_for_fit(discs, CHOICE_POOL * max_discs)
+    pool = _order_for_fit(discs, len(discs))
     groups: dict[tuple[bool, int], list[Disc]] = {(False, 0): [], (False, 1): [], (True, 0): [], (True, 1): []}
     set_aside: dict[int, str] = {}
     stretched: list[tuple[Disc, Ellipse]] = []
-    for disc in pool:  # discs on their own come first: once max_discs of them are regular, the rest can wait
+    for n, disc in enumerate(pool):  # discs on their own come first: once max_discs of them are regular, the rest can wait
         if len(groups[False, 0]) >= max_discs:
             break
+        if n == CHOICE_POOL * max_discs and (any(groups.values()) or _any_explained(stretched, shape)):
+            break  # the clearest give discs to fit: the rest can wait
         screens = screen(disc.outline_xy, families, slit_aspect(disc), disc.outline_reliable, models)
         kind, misfit = _outline_class(screens, None)
         ellipse = None
@@ -142,6 +147,12 @@ def _chosen(discs: list[Disc], families: tuple[Family, ...], max_discs: int, mod
                                      "disc is and not as a cat-eye at its place: not the aperture's image")
     order = {disc.index: i for i, disc in enumerate(pool)}
     return [disc for group in groups.values() for disc in sorted(group, key=lambda d: order[d.index])][:max_discs], set_aside
+
+
+def _any_explained(stretched: list[tuple[Disc, Ellipse]], shape: tuple[int, int]) -> bool:
+    """Whether a lens feature accounts for one of the elongated discs (:func:`_stretch_explained`)."""
+    return any(_stretch_explained(disc, ellipse, [e for d, e in stretched if d is not disc], shape)
+               for disc, ellipse in stretched)
 
 
 def slit_aspect(disc: Disc) -> float:
