@@ -32,9 +32,8 @@ It takes a fraction of the time of the whole run, for trying a change to the sea
 
 ``--sheets DIR`` also writes, per photo, a contact sheet (``DIR/NAME.sheet.png``) of what the table counts
 against the finder: each disc the fit used that is not a labelled disc, and each labelled usable disc missed
-with why, a tile each, with the search's outlines (red: used, yellow: usable, grey: not usable) and the
-label's circle (green): a miss is read in seconds where its numbers take minutes. The sheets show the photos:
-keep them out of the repository (their licences, ``reference_photos/MANIFEST.md``).
+with why, a tile each, with the search's outlines as the report draws them and the label's circle (yellow):
+a miss is read in seconds where its numbers take minutes. The sheets show the photos: keep them out of the repository (their licences, ``reference_photos/MANIFEST.md``).
 
 ``--at-places`` measures each labelled usable disc and each labelled non-disc at its own place and
 size, as the search measures a place, and counts those that pass its tests of a disc: whether a miss
@@ -50,6 +49,7 @@ import os
 import sys
 import time
 from collections import Counter
+from dataclasses import replace
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -111,51 +111,53 @@ def why_each(comparison, score: DiscScore) -> list:
     return reasons
 
 
-#: A contact sheet's tiles: their side (px), how many a row, and the most a sheet shows.
+#: A contact sheet's tiles: their side (px), how many a row, and the most a sheet shows; the labelled disc's
+#: circle (BGR: the Okabe–Ito yellow, apart from the report's outline colours).
 TILE_PX, TILES_A_ROW, MOST_TILES = 220, 6, 48
+LABEL_BGR = (66, 228, 240)
 
 
 def write_sheet(comparison, score: DiscScore, path: Path) -> int:
     """A contact sheet (PNG) of what to look at on one photo: each disc the fit used that is not a labelled
     disc (what the score calls it) and each labelled usable disc missed (why), a tile each, with every disc
-    the search found outlined (red: used by the fit, yellow: usable, grey: not usable) and the label's circle
-    in green. Returns how many tiles it shows; writes nothing where there are none."""
+    the search found drawn as the report draws it (:func:`bokehfit.report.overlay.draw_disc_overlay`: used,
+    usable, rejected; soft-edged dashed) and the label's circle in yellow. Returns how many tiles it shows;
+    writes nothing where there are none."""
     import cv2
     import numpy as np
 
-    from bokehfit.outputs import write_bytes_atomic
+    from bokehfit.outputs import write_png
+    from bokehfit.report.overlay import draw_disc_overlay
 
     items = [((xy, size), f"used {what}") for xy, size, what in score.junk_used]
     items += [((label.center_xy, label.diameter_px), why) for label, why in why_each(comparison, score)]
     items = items[:MOST_TILES]
     if not items:
         return 0
-    photo = cv2.cvtColor(np.ascontiguousarray(comparison.photo.display), cv2.COLOR_RGB2BGR)
+    display = comparison.photo.display
+    height, width = display.shape[:2]
     used = {d.index for d in comparison.used_discs}
     tiles = []
     for ((x, y), size), caption in items:
         half = max(24, int(math.ceil(1.2 * size)))
-        scale = TILE_PX / (2 * half)
-        padded = cv2.copyMakeBorder(photo, half, half, half, half, cv2.BORDER_CONSTANT)
-        x0, y0 = int(round(x)) - half, int(round(y)) - half
-        tile = cv2.resize(padded[y0 + half : y0 + 3 * half, x0 + half : x0 + 3 * half], (TILE_PX, TILE_PX),
-                          interpolation=cv2.INTER_AREA if scale < 1 else cv2.INTER_LINEAR)
-        for disc in comparison.search.discs:
-            colour = (0, 0, 255) if disc.index in used else (0, 220, 255) if disc.usable else (160, 160, 160)
-            points = np.round((disc.outline_xy - [x0, y0]) * scale).astype(np.int32)
-            cv2.polylines(tile, [points], True, colour, 1, cv2.LINE_AA)
+        x0, y0 = int(round(x)) - half, int(round(y)) - half  # the tile's corner in the photo
+        crop = np.zeros((2 * half, 2 * half, 3), np.uint8)  # black beyond the frame
+        r0, c0, r1, c1 = max(0, y0), max(0, x0), min(height, y0 + 2 * half), min(width, x0 + 2 * half)
+        if r1 > r0 and c1 > c0:
+            crop[r0 - y0 : r1 - y0, c0 - x0 : c1 - x0] = display[r0:r1, c0:c1]
+        near = [replace(d, outline_xy=d.outline_xy - [x0, y0]) for d in comparison.search.discs
+                if math.dist(d.center_xy, (x, y)) < 2.0 * half + d.diameter_px]
+        tile = draw_disc_overlay(crop, near, used, max_side=TILE_PX)
+        tile = cv2.resize(tile, (TILE_PX, TILE_PX), interpolation=cv2.INTER_AREA if 2 * half > TILE_PX else cv2.INTER_LINEAR)
         if not caption.startswith("used"):
-            cv2.circle(tile, (TILE_PX // 2, TILE_PX // 2), int(round(0.5 * size * scale)), (0, 200, 0), 1, cv2.LINE_AA)
+            radius = int(round(0.5 * size * TILE_PX / (2 * half)))
+            cv2.circle(tile, (TILE_PX // 2, TILE_PX // 2), radius, LABEL_BGR, 1, cv2.LINE_AA)
         for text, at in ((f"({x:.0f}, {y:.0f}) {size:.0f} px", 0), (caption[:44], TILE_PX - 16)):
             cv2.rectangle(tile, (0, at), (TILE_PX - 1, at + 15), (0, 0, 0), cv2.FILLED)
             cv2.putText(tile, text, (3, at + 11), cv2.FONT_HERSHEY_SIMPLEX, 0.36, (255, 255, 255), 1, cv2.LINE_AA)
         tiles.append(tile)
     tiles += [np.zeros_like(tiles[0])] * (-len(tiles) % TILES_A_ROW)
-    sheet = np.vstack([np.hstack(tiles[i : i + TILES_A_ROW]) for i in range(0, len(tiles), TILES_A_ROW)])
-    ok, data = cv2.imencode(".png", sheet)
-    if not ok:
-        raise OSError(f"could not encode {path.name}")
-    write_bytes_atomic(path, data.tobytes())
+    write_png(path, np.vstack([np.hstack(tiles[i : i + TILES_A_ROW]) for i in range(0, len(tiles), TILES_A_ROW)]))
     return len(items)
 
 

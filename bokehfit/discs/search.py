@@ -364,7 +364,7 @@ def _measure_blob(scales: PhotoScales, candidate: Candidate, min_diameter_px: fl
     reason = m.reason if m.reason is not None else (Reason.TOO_LARGE if m.diameter_px > max_diameter_px else None)
     if reason is not None:
         rejection = Rejection.of(m.center_xy, m.diameter_px, reason)
-        return (m, rejection) if soft_edged(m) and m.diameter_px <= max_diameter_px else rejection
+        return (m, rejection) if _soft_disc(m, max_diameter_px) else rejection
     # A blob of overlapping discs is measured as its discs, each with the outline it shows.
     parts = split_cluster(m) if m.overlaps and m.diameter_px >= 2.0 * RESOLVABLE_PX else []
     if not parts:
@@ -502,9 +502,15 @@ def _new_places(places, seen, measure, measurements, sizes, rejected, rejections
             rejection = Rejection.of(xy, diameter, why)
             rejected[rejection.rejected_because] += 1
             rejections.append(rejection)
-            if soft is not None and isinstance(m, Measurement) and soft_edged(m) and sizes[0] <= m.diameter_px <= sizes[1]:
+            if soft is not None and isinstance(m, Measurement) and _soft_disc(m, sizes[1]):
                 soft.append((m, rejection))
     return measured
+
+
+def _soft_disc(m: Measurement, max_diameter_px: float) -> bool:
+    """A measurement refused that is a soft-edged disc (:func:`bokehfit.discs.verdict.soft_edged`) no larger than
+    the discs sought (none is smaller: the size is tested before the edge)."""
+    return soft_edged(m) and m.diameter_px <= max_diameter_px
 
 
 def _ring_by_rays(luminance, clipped, m: Measurement | NoDisc, xy, diameter: float,

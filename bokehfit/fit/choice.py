@@ -46,13 +46,13 @@ CHOICE_POOL = 4
 MIN_SHARP_DISCS = 3
 
 
-def _order_for_fit(discs: list[Disc], max_discs: int) -> list[Disc]:
-    """The clearest usable discs, at most ``max_discs``: those on their own before those beside or on
-    other light (fitted with that light left out); within each, clean ones first, then edges, then
-    outlines seen in part; the largest and clearest first."""
+def _order_for_fit(discs: list[Disc]) -> list[Disc]:
+    """The usable discs, clearest first: those on their own before those beside or on other light (fitted
+    with that light left out); within each, clean ones first, then edges, then outlines seen in part; the
+    largest and clearest first."""
     usable = [d for d in discs if d.usable]
     usable.sort(key=lambda d: (d.overlaps, USABLE_EVIDENCE.index(d.evidence), -d.diameter_px * min(d.snr, 50.0)))
-    return usable[:max_discs]
+    return usable
 
 
 def _outline_class(screens: list[Screen], ellipse: Ellipse | None) -> tuple[int, float]:
@@ -114,14 +114,14 @@ def _chosen(discs: list[Disc], families: tuple[Family, ...], max_discs: int, mod
     straight families suffice (a rounded polygon lies between its straight one and the circle) and
     keep the screen cheap; all of them, whatever shapes the fit tries. ``models`` is the fit's memo of
     model signatures (:func:`~bokehfit.fit.signature.screen`); ``shape`` the photo's (rows, columns)."""
-    pool = _order_for_fit(discs, len(discs))
+    pool = _order_for_fit(discs)
     groups: dict[tuple[bool, int], list[Disc]] = {(False, 0): [], (False, 1): [], (True, 0): [], (True, 1): []}
     set_aside: dict[int, str] = {}
     stretched: list[tuple[Disc, Ellipse]] = []
     for n, disc in enumerate(pool):  # discs on their own come first: once max_discs of them are regular, the rest can wait
         if len(groups[False, 0]) >= max_discs:
             break
-        if n == CHOICE_POOL * max_discs and (any(groups.values()) or _any_explained(stretched, shape)):
+        if n == CHOICE_POOL * max_discs and (any(groups.values()) or any(_explained(stretched, shape))):
             break  # the clearest give discs to fit: the rest can wait
         screens = screen(disc.outline_xy, families, slit_aspect(disc), disc.outline_reliable, models)
         kind, misfit = _outline_class(screens, None)
@@ -138,9 +138,8 @@ def _chosen(discs: list[Disc], families: tuple[Family, ...], max_discs: int, mod
         else:
             set_aside[disc.index] = (f"no aperture shape explains its outline (misfit {misfit:.2f} of its radius, "
                                      f"at most {REGULAR_OUTLINE_MISFIT} for a disc)")
-    for disc, ellipse in stretched:
-        others = [e for d, e in stretched if d is not disc]
-        if _stretch_explained(disc, ellipse, others, shape):
+    for (disc, ellipse), explained in zip(stretched, _explained(stretched, shape)):
+        if explained:
             groups[disc.overlaps, 1].append(disc)
         else:
             set_aside[disc.index] = (f"stretched (aspect {ellipse.aspect:.2f} at {ellipse.axis_deg:.0f}°) as no other "
@@ -149,10 +148,11 @@ def _chosen(discs: list[Disc], families: tuple[Family, ...], max_discs: int, mod
     return [disc for group in groups.values() for disc in sorted(group, key=lambda d: order[d.index])][:max_discs], set_aside
 
 
-def _any_explained(stretched: list[tuple[Disc, Ellipse]], shape: tuple[int, int]) -> bool:
-    """Whether a lens feature accounts for one of the elongated discs (:func:`_stretch_explained`)."""
-    return any(_stretch_explained(disc, ellipse, [e for d, e in stretched if d is not disc], shape)
-               for disc, ellipse in stretched)
+def _explained(stretched: list[tuple[Disc, Ellipse]], shape: tuple[int, int]) -> list[bool]:
+    """For each elongated disc (with its ellipse), whether a lens feature accounts for its stretch
+    (:func:`_stretch_explained`, against the others)."""
+    return [_stretch_explained(disc, ellipse, [e for d, e in stretched if d is not disc], shape)
+            for disc, ellipse in stretched]
 
 
 def slit_aspect(disc: Disc) -> float:
