@@ -104,8 +104,8 @@ def test_colours_of_too_few_discs_are_not_measured_and_the_report_says_why():
     fit = fit_aperture(luminance(rgb), find_discs(luminance(rgb)).discs, shapes=["circle"],
                        rgb=lambda rows, cols: rgb[rows, cols])
     assert fit.chromatic_measure is None and fit.aperture.chromatic is None
-    assert ("chromatic", "2 discs kept (3 needed)") in fit.features_not_tried, fit.features_not_tried
-    assert {"feature": "chromatic", "reason": "2 discs kept (3 needed)"} in fit.to_json()["features_not_tried"]
+    assert ("chromatic", "2 discs kept (4 needed)") in fit.features_not_tried, fit.features_not_tried
+    assert {"feature": "chromatic", "reason": "2 discs kept (4 needed)"} in fit.to_json()["features_not_tried"]
 
 
 def test_a_few_discs_that_agree_by_chance_are_not_significant():

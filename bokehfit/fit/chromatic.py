@@ -64,8 +64,12 @@ from bokehfit.discs.measure import outline_diameter
 __all__ = ["ChromaticMeasure", "measure_chromatic", "median_and_bar", "MIN_DISCS", "MIN_SIGNIFICANCE", "MIN_CHROMATIC",
            "CHANNEL_EDGE_PX"]
 
-#: Fewest discs measured in all three channels for a value.
-MIN_DISCS = 3
+#: Fewest discs measured in all three channels for a value: four. Of three, the median absolute deviation is the
+#: median disc's nearer neighbour's distance (the median disc's own is zero), so that two discs agreeing by chance
+#: make the spread nil and leave the floor (CHANNEL_EDGE_PX) as the error: a noisy copy of reference photo 04 gave red
+#: −1.5 %, −2.9 % and −2.85 % (the last a faint ring on a twig that noise made a plateau), "significant" against
+#: the floor alone. Of four, the deviation is the mean of two discs' and reads their spread.
+MIN_DISCS = 4
 #: A channel's median must lie this many robust standard errors from 0 ...
 MIN_SIGNIFICANCE = 3.0
 #: ... and at least this far (0.5 % of the diameter: a tenth of a pixel on a 20-px disc).
