@@ -13,8 +13,9 @@ from scipy import ndimage
 
 from bokehfit.discs import measure_discs_at
 from bokehfit.discs.candidates import MIN_NOISE
+from bokehfit.discs.levels import pixel_noise
 from bokehfit.discs.measure import measure_candidate
-from bokehfit.discs.rays import measure_rays, pixel_noise
+from bokehfit.discs.rays import measure_rays
 from bokehfit.discs.reasons import NoDisc
 
 SUPERSAMPLE = 4

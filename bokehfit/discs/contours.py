@@ -11,6 +11,7 @@ that a contour cut by the frame closes just outside it (its points there lie out
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -27,14 +28,54 @@ __all__ = ["polygon_area_centroid"]
 _SUBPIXEL = 16
 
 
-def _edge_gradient(crop: np.ndarray, outline: np.ndarray, gradients: tuple[np.ndarray, np.ndarray] | None = None) -> float:
+def _edge_gradient(crop: np.ndarray, outline: np.ndarray, gradients: tuple[np.ndarray, np.ndarray] | None = None,
+                   noise: float = 0.0, smoothing_px: float = 0.0) -> float:
     """Median gradient magnitude of the image along the outline (bilinear samples); ``gradients``, the
-    crop's (rows, columns) gradients where the caller has them already (:func:`_crop_gradients`)."""
+    crop's (rows, columns) gradients where the caller has them already (:func:`_crop_gradients`).
+
+    Where ``noise`` (the standard deviation of the crop's white pixel noise before a Gaussian smoothing of
+    ``smoothing_px``, if any) is given, the noise's share is taken out of each sample's squared magnitude
+    (:func:`_gradient_noise_power`) before the median: noise adds its power to the gradient's, so that
+    an edge whose slope is comparable to the noise reads steeper than it is."""
     gy, gx = _crop_gradients(crop) if gradients is None else gradients
     coords = [outline[:, 1], outline[:, 0]]  # (row, col)
     gx_at = ndimage.map_coordinates(gx, coords, order=1, mode="nearest")
     gy_at = ndimage.map_coordinates(gy, coords, order=1, mode="nearest")
-    return float(_median(np.hypot(gx_at, gy_at)))
+    if noise <= 0.0:
+        return float(_median(np.hypot(gx_at, gy_at)))
+    power = gx_at * gx_at + gy_at * gy_at - _gradient_noise_power(noise, smoothing_px, outline)
+    return math.sqrt(max(float(_median(power)), 0.0))
+
+
+def _gradient_noise_power(noise: float, smoothing_px: float, points: np.ndarray) -> np.ndarray:
+    """The expected squared magnitude that white pixel noise of standard deviation ``noise`` gives the gradient
+    :func:`_edge_gradient` samples at each of ``points`` ((x, y) in the crop): the crop smoothed by a Gaussian
+    of ``smoothing_px`` (none: 0) and differenced as :func:`_crop_gradients` does, then interpolated
+    bilinearly from four neighbouring samples, whose noise is correlated (:func:`_gradient_noise_covariances`).
+    Exact for a point at least the kernel's reach inside the crop."""
+    c00, c01, c10, c11, c1m = _gradient_noise_covariances(float(smoothing_px))
+    fr, fc = points[:, 1] % 1.0, points[:, 0] % 1.0
+    wa, wb, wc, wd = (1 - fr) * (1 - fc), (1 - fr) * fc, fr * (1 - fc), fr * fc  # (r, c), (r, c+1), (r+1, c), (r+1, c+1)
+    variance = ((wa * wa + wb * wb + wc * wc + wd * wd) * c00 + 2.0 * ((wa * wb + wc * wd) * c01 + (wa * wc + wb * wd) * c10
+                + wa * wd * c11 + wb * wc * c1m))
+    return noise * noise * variance
+
+
+@functools.lru_cache(maxsize=256)
+def _gradient_noise_covariances(smoothing_px: float) -> tuple[float, float, float, float, float]:
+    """The covariances, per unit noise variance and summed over the two components, of the gradient samples
+    :func:`_crop_gradients` gives at a pixel and at its neighbours (0, 0), (0, 1), (1, 0), (1, 1) and (1, −1)
+    (rows, columns) away, of white noise smoothed by a Gaussian of ``smoothing_px`` (0: none; then 1, 0, 0, 0,
+    0): from the impulse response of the smoothing and the differences."""
+    reach = int(math.ceil(4.0 * smoothing_px)) + 3
+    impulse = np.zeros((2 * reach + 1, 2 * reach + 1), np.float32)
+    impulse[reach, reach] = 1.0
+    if smoothing_px > 0.0:
+        impulse = cv2.GaussianBlur(impulse, (0, 0), smoothing_px, borderType=cv2.BORDER_REPLICATE)
+    responses = [r.astype(np.float64) for r in _crop_gradients(impulse)]
+    # The responses are zero beyond the kernel's reach, well inside the impulse's frame: a roll is a shift.
+    return tuple(float(sum(np.sum(h * np.roll(h, shift, axis=(0, 1))) for h in responses))
+                 for shift in ((0, 0), (0, 1), (1, 0), (1, 1), (1, -1)))
 
 
 def _crop_gradients(crop: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

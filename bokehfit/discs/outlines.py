@@ -70,6 +70,11 @@ class Outlined:
     #: gaps): the outline next to them is not the disc's own; None where there are none.
     bridged: np.ndarray | None
     on_cut: np.ndarray  #: per outline point: on the cutting circle, or otherwise not the disc's own edge
+    #: The Gaussian (σ, px) the crop was smoothed with (0: none), and the standard deviation of the white pixel
+    #: noise before it (None: read off the crop, :func:`bokehfit.discs.levels.pixel_noise`): the noise's share of
+    #: the edge's gradient (:func:`bokehfit.discs.contours._edge_gradient`).
+    smoothing_px: float = 0.0
+    pixel_noise: float | None = None
 
 
 def _closed_outline(luminance, center_xy, radius, reach, core_rel=0.8, percentile=90, levelled=None, edge_rel=1.0):

@@ -48,12 +48,12 @@ import numpy as np
 from scipy import ndimage
 
 from bokehfit.discs.contours import polygon_area_centroid
-from bokehfit.discs.levels import Levels, Window, _median, _row_medians
+from bokehfit.discs.levels import Levels, Window, _median, _row_medians, pixel_noise
 from bokehfit.discs.outlines import Outlined
 from bokehfit.discs.reasons import NoDisc, Reason
 from bokehfit.discs.verdict import Measurement, describe
 
-__all__ = ["measure_rays", "pixel_noise", "RAYS", "MIN_STEP_SIGMA", "MIN_SEEN"]
+__all__ = ["measure_rays", "RAYS", "MIN_STEP_SIGMA", "MIN_SEEN"]
 
 #: Rays around the centre: about one per 3 px of circumference, within these bounds.
 RAYS = (48, 256)
@@ -103,17 +103,6 @@ MIN_SEEN = 0.35
 #: Gaussian smoothing of the crop before sampling (px): this share of the radius, within bounds.
 SMOOTH_REL = 0.015
 SMOOTH_PX = (0.6, 3.0)
-
-
-def pixel_noise(crop: np.ndarray) -> float:
-    """The standard deviation of the pixel noise of ``crop``, from its finest scale: the median
-    absolute response to the 3×3 second-difference mask (Immerkær 1996) over its norm, 6. Smooth
-    light (haze, a neighbouring disc) adds nothing; edges are a minority the median ignores."""
-    if min(crop.shape) < 3:
-        return 0.0
-    mask = np.array([[1, -2, 1], [-2, 4, -2], [1, -2, 1]], np.float32)
-    response = cv2.filter2D(np.ascontiguousarray(crop, np.float32), -1, mask, borderType=cv2.BORDER_REFLECT)
-    return float(1.4826 * np.median(np.abs(response[1:-1, 1:-1])) / 6.0)
 
 
 def _polar(crop: np.ndarray, centre_rc: tuple[float, float], rays: int, radii: np.ndarray):
@@ -371,7 +360,7 @@ def measure_rays(
         if isinstance(traced, NoDisc):
             return traced
         outline, seen, levels = traced
-        found = Outlined(Window(r0, c0, r1, c1), crop, levels, outline, False, None, ~seen)
+        found = Outlined(Window(r0, c0, r1, c1), crop, levels, outline, False, None, ~seen, smooth, noise)
         area, cx, cy = polygon_area_centroid(outline)
         if area <= 0:
             return NoDisc(Reason.NO_OUTLINE)

@@ -12,7 +12,10 @@ A candidate is kept as a disc when all of these hold (the rejection reasons, eac
                     below ``MIN_CONTRAST_ABS`` (linear) or below
                     ``MIN_CONTRAST_REL`` of the background;
 ``soft edge``       the edge is wide for the size: the edge width, contrast over
-                    the median gradient along the outline, exceeds
+                    the median gradient along the outline (its squared magnitude
+                    less the share the crop's white pixel noise adds to it: noise
+                    steepens a soft edge's slope, and made faint glows read
+                    sharp), exceeds
                     ``max(EDGE_WIDTH_MIN_PX, EDGE_WIDTH_MAX_REL · r)``. A flat disc
                     blurred by b px has 2.5 b; an in-focus glint or a smooth
                     blob (Gaussian: 1.44 r) much more. Measured on the outline,
@@ -56,7 +59,7 @@ import numpy as np
 from scipy import ndimage
 
 from bokehfit.discs.contours import _deep_concavities, _edge_gradient, polygon_area_centroid
-from bokehfit.discs.levels import Window, _contrast_ok, _median
+from bokehfit.discs.levels import Window, _contrast_ok, _median, pixel_noise
 from bokehfit.discs.outlines import EDGE_WIDTH_MIN_PX, Outlined
 from bokehfit.discs.reasons import Reason
 
@@ -166,7 +169,9 @@ def describe(luminance, clipped_mask, found: Outlined, min_noise, min_diameter_p
     cv2.fillPoly(inside, [np.round(outline).astype(np.int32)], 1)
     # The edge is measured where it is seen: not along a cutting circle or a filled-in arc.
     edge_points = outline[~found.on_cut] if (~found.on_cut).sum() >= 4 else outline
-    edge_width = contrast / max(_edge_gradient(crop, edge_points), 1e-12)
+    # The edge's slope less the noise's share of it: noise steepens the slope a faint or soft edge shows.
+    noise_px = found.pixel_noise if found.pixel_noise is not None else pixel_noise(crop)
+    edge_width = contrast / max(_edge_gradient(crop, edge_points, None, noise_px, found.smoothing_px), 1e-12)
     outline_xy = outline + np.array([window.c0, window.r0], dtype=np.float64)
     off_frame = _off_frame(outline_xy, luminance.shape)
     unseen = off_frame | found.on_cut | _near(found.bridged, outline, UNSEEN_MARGIN_PX)
