@@ -14,7 +14,8 @@ discs seen, used (and as what: plateau, saturated outline, ring) and left out
 with the reasons. The verdict:
 
 - ``right``: fitted, and the shape is round (a circle, or a rounded polygon
-  with roundness ≥ 0.8), the rim positive where the label says so, no slit;
+  with roundness ≥ 0.8), the rim positive where the label says so, a cat-eye
+  vignetting where the label calls it strong, no slit;
 - ``right, unsure`` / ``honest``: unsure with a right answer / unsure with an
   answer the label does not share, or no_fit / no_discs, with the reason given;
 - ``WRONG``: fitted, and the answer contradicts the label.
@@ -92,6 +93,8 @@ def agrees(label: dict, aperture: dict) -> tuple[bool, str]:
         wrong.append("an elongated aperture")
     if label.get("rim") == "positive" and not (aperture.get("rim") or 0.0) > 0.0:
         wrong.append("no bright rim")
+    if label.get("vignetting") == "strong" and not aperture.get("vignetting"):
+        wrong.append("no cat-eye vignetting")  # a mild one may hide in the discs' scatter; a strong one does not
     return not wrong, ", ".join(wrong)
 
 

@@ -15,8 +15,10 @@ compares calls of the same run on the same machine, and the CPU ratio is the ste
 machine shared with other work.
 
 Per photo the table gives those ratios, ``compare``'s stages (``Comparison.timing_s``: load,
-detect, fit, render, metrics) and the fit's steps (``ApertureFit.timing_s``: choose, screen, the
-per-family fits summed, joint, features, the rest). ``--json`` also keeps each photo's answer
+detect, fit, render, metrics), the disc search's steps (``DiscSearch.timing_s``: the candidates,
+their measurement, the circles through edges, the circles of the sizes found, the own steps) and
+the fit's steps (``ApertureFit.timing_s``: choose, screen, the per-family fits summed, joint,
+features, the rest). ``--json`` also keeps each photo's answer
 (status, shape, angle, features, diameter) so that two runs can be checked for the same answers.
 
 ``--coverages`` times nothing: per photo it counts the exact coverages the fit computes (plain and
@@ -49,6 +51,8 @@ STAGES = ("load", "detect", "fit", "render", "metrics")
 JACOBIAN_FRAMES = ("approx_derivative", "jac")
 #: The fit's steps shown as columns; ``families`` sums the ``family <name>`` steps, ``other`` the rest.
 STEPS = ("choose", "screen", "families", "joint", "features")
+#: The disc search's steps shown as columns (``DiscSearch.timing_s``; its result's making is left in "detect").
+SEARCH_STEPS = ("candidates", "measure", "edge circles", "sized circles", "own steps")
 
 
 def timed(path: Path, **kwargs) -> dict:
@@ -67,6 +71,7 @@ def timed(path: Path, **kwargs) -> dict:
         "cpu_s": cpu,
         "stages_s": {k: comparison.timing_s.get(k, 0.0) for k in STAGES},
         "fit_steps_s": grouped,
+        "search_steps_s": dict(comparison.search.timing_s),
         "family_fits_s": families,
         "answer": {
             "status": comparison.status,
@@ -81,13 +86,15 @@ def timed(path: Path, **kwargs) -> dict:
 
 
 def table(rows: dict, reference: dict) -> list[str]:
-    head = ["photo", "wall s", "× 24 MP", "CPU s", "CPU × 24 MP", *STAGES, *(f"fit: {s}" for s in STEPS), "fit: other"]
+    head = ["photo", "wall s", "× 24 MP", "CPU s", "CPU × 24 MP", *STAGES, *(f"find: {s}" for s in SEARCH_STEPS),
+            *(f"fit: {s}" for s in STEPS), "fit: other"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for name, row in rows.items():
         steps = row["fit_steps_s"]
         other = sum(v for k, v in steps.items() if k not in STEPS)
         cells = [name, f"{row['wall_s']:.2f}", f"{row['wall_s'] / reference['wall_s']:.2f}", f"{row['cpu_s']:.2f}",
                  f"{row['cpu_s'] / reference['cpu_s']:.2f}", *(f"{row['stages_s'][s]:.2f}" for s in STAGES),
+                 *(f"{row['search_steps_s'].get(s, 0.0):.2f}" for s in SEARCH_STEPS),
                  *(f"{steps.get(s, 0.0):.2f}" for s in STEPS), f"{other:.2f}"]
         lines.append("| " + " | ".join(cells) + " |")
     return lines

@@ -541,3 +541,13 @@ def test_the_bright_centre_search_settles_as_all_its_levels_do():
         answers.append(expected)
     assert len(answers) >= 50 and sum(a is None for a in answers) >= 10 and sum(a is not None for a in answers) >= 5, \
         (len(answers), sum(a is None for a in answers))
+
+
+def test_the_search_reports_the_time_of_each_step():
+    """``DiscSearch.timing_s``: the search's steps by name, each a share of its whole time (for the speed table of
+    ``benchmarks/real_speed.py``)."""
+    disc = SyntheticDisc((80.3, 70.6), 40, make_aperture("hexagon", 12))
+    search = find_discs(render_discs(200, 160, [disc], background=0.03, seed=2), min_diameter_px=8)
+    assert list(search.timing_s) == ["candidates", "measure", "edge circles", "sized circles", "own steps", "result"]
+    assert all(t >= 0.0 for t in search.timing_s.values())
+    assert sum(search.timing_s.values()) <= search.time_s

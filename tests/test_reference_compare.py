@@ -42,7 +42,7 @@ def test_05_weak_case_is_not_a_confident_fit(compared):
 @pytest.mark.parametrize("name", sorted(LABELS))
 def test_a_fitted_answer_is_never_wrong(compared, name):
     """Every labelled photo (a person's reading of zoomed crops): a sure answer shares the label
-    (round, the rim's sign where the discs show one); anything else is unsure, no_fit or no_discs
+    (round, the rim's sign where the discs show one, a strong cat-eye); anything else is unsure, no_fit or no_discs
     with a reason. Edge discs' lemon shapes are vignetting, never an elongated aperture."""
     label = LABELS[name]
     comparison = compared(name)
@@ -57,3 +57,5 @@ def test_a_fitted_answer_is_never_wrong(compared, name):
         assert aperture.is_circle or aperture.roundness >= ROUND_ENOUGH, comparison.fit.message
     if label.get("rim") == "positive":
         assert aperture.rim > 0, f"a sure answer without the bright rim the discs show: {comparison.fit.message}"
+    if label.get("vignetting") == "strong":
+        assert aperture.vignetting is not None, f"a sure answer without the cat-eye the edge discs show: {comparison.fit.message}"

@@ -169,6 +169,9 @@ class DiscSearch:
     #: The places were given (a person's discs, :func:`bokehfit.discs.measure_discs_at`), not searched for:
     #: each that is no disc is one the person asked about.
     given: bool = False
+    #: Seconds (wall) of the search's steps, by name (:func:`bokehfit.discs.find_discs`'s: the candidates, their
+    #: measurement, the circles through edges, the circles of the sizes found, the own steps, the result).
+    timing_s: dict[str, float] = field(default_factory=dict)
 
     def __bool__(self) -> bool:
         return bool(self.discs)
@@ -251,12 +254,14 @@ def _check_parameters(shape, clipped, min_diameter_px, max_diameter_px, max_disc
 
 
 def _discs_of(measurements, found, rejected, start, notes, rejections, max_discs, given: bool = False,
-              soft=()) -> DiscSearch:
+              soft=(), timing_s: dict[str, float] | None = None) -> DiscSearch:
     """The search's discs from its measurements: one per disc, largest first, each with what it offers (``given``:
     the places were a person's, :attr:`DiscSearch.given`). ``soft``: the soft-edged discs the search measured
     ((measurement, its rejection) each, :func:`bokehfit.discs.verdict.soft_edged`), kept as discs of the second
     tier where they lie clear of every sharp disc (:func:`_clear_of`): their rejections leave ``rejections`` and
-    ``rejected``. The sharp discs are made from their own measurements alone, as without them."""
+    ``rejected``. The sharp discs are made from their own measurements alone, as without them. ``timing_s``: the
+    search's steps' seconds so far (:attr:`DiscSearch.timing_s`), to which this one's ("result") is added."""
+    made_from = time.perf_counter()
     measurements = _distinct_measurements(measurements)
     measurements.sort(key=lambda m: -m.diameter_px)
     if max_discs is not None:
@@ -275,7 +280,9 @@ def _discs_of(measurements, found, rejected, start, notes, rejections, max_discs
             if id(r) in dropped:
                 rejected[r.rejected_because] -= 1
         rejections = [r for r in rejections if id(r) not in dropped]
-    return DiscSearch(discs, found, +rejected, time.perf_counter() - start, tuple(notes), tuple(rejections), given)
+    end = time.perf_counter()
+    steps = {**(timing_s or {}), "result": end - made_from}
+    return DiscSearch(discs, found, +rejected, end - start, tuple(notes), tuple(rejections), given, steps)
 
 
 def _same_disc(m: Measurement, other: Measurement) -> bool:

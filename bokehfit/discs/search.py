@@ -37,6 +37,7 @@ import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 
+from bokehfit.clock import Clock
 from bokehfit.discs.candidates import LARGE_DISC_PX, MIN_NOISE, Candidate, find_candidates
 from bokehfit.discs.circles import SIZE_STEP, find_circles, find_sized_circles
 from bokehfit.discs.colours import sharp_in_a_colour
@@ -167,16 +168,23 @@ def find_discs(
     notes: list[str] = []
     rejections: list[Rejection] = []
     soft: list[tuple[Measurement, Rejection]] = []  # soft-edged discs, kept apart (step 6)
+    clock = Clock()
     candidates, found = _candidates(luminance, min_diameter_px, search_max_px, rejected, notes)
+    clock("candidates")
     measurements = _measure_candidates(luminance, clipped, candidates, min_diameter_px, max_diameter_px, progress,
                                        rejected, rejections, rgb, soft)
+    clock("measure")
     found += _circle_discs(luminance, clipped, measurements, min_diameter_px, min(max_diameter_px, search_max_px),
                            rejected, rejections, soft)
+    clock("edge circles")
     found += _sized_discs(luminance, clipped, measurements, min_diameter_px, min(max_diameter_px, search_max_px),
                           rejected, rejections, soft)
+    clock("sized circles")
     measurements = _by_own_steps(luminance, clipped, measurements, min_diameter_px)
     soft = [(m, rejection) for m, rejection in soft if light_ends(luminance, m)]  # a glow's tail goes on
-    return _discs_of(measurements, found, rejected, start, notes, rejections, max_discs, soft=soft)
+    clock("own steps")
+    return _discs_of(measurements, found, rejected, start, notes, rejections, max_discs, soft=soft, timing_s=clock.timing)
+
 
 
 def _candidates(luminance, min_diameter_px: float, search_max_px: float, rejected: Counter,

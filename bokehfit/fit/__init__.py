@@ -47,6 +47,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from bokehfit.clock import Clock
 from bokehfit.discs import Disc
 from bokehfit.errors import InputError
 from bokehfit.fit.answer import aperture_fit, judge_margin, measure_colours, measure_size, rank_candidates, refit_rest
@@ -64,7 +65,6 @@ from bokehfit.fit.result import (
     Parameter,
 )
 from bokehfit.fit.stages import (
-    Clock,
     check_simplest,
     choose,
     find_consensus,

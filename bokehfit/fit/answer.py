@@ -20,11 +20,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from bokehfit.apertures import Aperture
+from bokehfit.clock import Clock
 from bokehfit.fit.agreement import combine, outline_misfits
 from bokehfit.fit.chromatic import MIN_DISCS, ChromaticMeasure, measure_chromatic
 from bokehfit.fit.pixels import JointFit, PixelFit, fit_discs
 from bokehfit.fit.result import ApertureFit, CandidateModel, DiscFit, FitOptions
-from bokehfit.fit.stages import JOINT_DISCS, Chosen, Clock, Consensus, Joint, Model, Selection
+from bokehfit.fit.stages import JOINT_DISCS, Chosen, Consensus, Joint, Model, Selection
 from bokehfit.words import counted
 
 __all__ = ["Colours", "Margin", "Refit", "Size", "aperture_fit", "judge_margin", "measure_colours", "measure_size",

@@ -20,13 +20,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
 from bokehfit.apertures import FEATURE_SPECS, Aperture
+from bokehfit.clock import Clock
 from bokehfit.discs import Disc
 from bokehfit.fit.agreement import combine, consensus_start, disagreeing, outline_misfits, turned_discs, unsupported
 from bokehfit.fit.choice import choose_discs, slit_aspect
@@ -38,7 +38,7 @@ from bokehfit.fit.result import CandidateModel, DiscFit, FitOptions
 from bokehfit.fit.signature import Screen, screen
 
 __all__ = [
-    "Chosen", "Clock", "Consensus", "Joint", "Model", "Screened", "Selection",
+    "Chosen", "Consensus", "Joint", "Model", "Screened", "Selection",
     "check_simplest", "choose", "find_consensus", "fit_families", "fit_joint", "fit_winner", "screen_discs",
     "select_model", "try_features", "JOINT_DISCS", "OUTLINE_SUPPORT_SHARE", "OUTLINE_DEPARTURE_RATIO",
 ]
@@ -69,27 +69,6 @@ JOINT_DISCS = 8
 #: along the flat valley of its angle for a hundred steps, each a millionth better. The winner's
 #: trials are then carried on to the fit's own tolerance (:func:`fit_winner`).
 TRIAL_TOLERANCE = 1e-4
-
-
-class Clock:
-    """Seconds by step of one fit (perf_counter), for ``ApertureFit.timing_s``.
-
-    Calling it with a step's name adds the time since the last call (or since the clock was made)
-    to that step; :meth:`elapsed` is the time since the clock was made.
-    """
-
-    def __init__(self) -> None:
-        self.start = time.perf_counter()
-        self._last = self.start
-        self.timing: dict[str, float] = {}
-
-    def __call__(self, step: str) -> None:
-        now = time.perf_counter()
-        self.timing[step] = self.timing.get(step, 0.0) + now - self._last
-        self._last = now
-
-    def elapsed(self) -> float:
-        return time.perf_counter() - self.start
 
 
 @dataclass(frozen=True)
