@@ -81,6 +81,12 @@ def score_comparison(comparison, labels: DiscLabels) -> DiscScore:
     return score_discs(labels, places(comparison.usable_discs), places(comparison.used_discs))
 
 
+def recall_by_kind(score: DiscScore) -> str:
+    """The recall of each kind of labelled disc (clean, saturated, overlapping, ...), in a line."""
+    return "recall by kind: " + ", ".join(f"{kind} {found}/{labelled}" for kind, (found, labelled)
+                                          in score.recall_by_kind().items())
+
+
 def why_missed(comparison, score: DiscScore) -> Counter:
     """Why the labelled usable discs were not found usable, counted (:func:`why_each`)."""
     return Counter(why for _, why in why_each(comparison, score))
@@ -203,12 +209,15 @@ def finder_only(args) -> int:
         why = why_missed(SimpleNamespace(search=search), score)
         for reason, n in why.items():  # pooled by what happened, whatever the label's kind
             missed[reason.split(":")[0] if reason.startswith("found, not usable") else reason.split(" (")[0]] += n
+        twice = f"  ({len(found[1].repeated)} labelled twice, counted once)" if found[1].repeated else ""
         print(f"{entry['file'][:2]}  recall {score.usable_found:3d}/{score.usable_labelled:<3d} usable found {score.used:4d}"
-              f" (labelled junk {score.used_as['junk']}, not discs in complete boxes {score.junk})  {cpu:5.1f} s CPU")
+              f" (labelled junk {score.used_as['junk']}, not discs in complete boxes {score.junk})  {cpu:5.1f} s CPU"
+              + twice)
         rows.append({"file": entry["file"], "score": score.to_json(), "cpu_s": round(cpu, 2), "missed": dict(why)})
     print(f"\npooled: recall {pooled.usable_found}/{pooled.usable_labelled}"
           f" ({'-' if pooled.recall is None else f'{pooled.recall:.1%}'}), usable found {pooled.used}"
           f" ({pooled.junk} not discs in complete boxes), search {seconds:.1f} s CPU")
+    print(recall_by_kind(pooled))
     print("missed: " + ", ".join(f"{n} {why}" for why, n in missed.most_common()))
     if args.json:
         args.json.write_text(json.dumps({"photos": rows, "pooled": pooled.to_json(), "cpu_s": round(seconds, 2)},
@@ -230,7 +239,7 @@ def at_places(args) -> int:
     passed, widths, counts = Counter(), {"disc": [], "not a disc": []}, Counter()
     for entry, photo, (_, labels) in labelled_photos(args.only):
         loaded = load_photo(photo)
-        items = [("disc", d.center_xy, d.diameter_px) for d in labels.usable]
+        items = [("disc", d.center_xy, d.diameter_px) for d in labels.distinct_usable]
         items += [("not a disc", j.center_xy, j.size_px) for j in labels.junk]
         seen = Counter()
         for what, xy, size in items:
@@ -303,6 +312,9 @@ def main(argv=None) -> int:
             if write_sheet(comparison, score, sheet):
                 print(f"                 sheet: {sheet}")
         result = {"file": entry["file"], "label": entry["label"], "own": own, "score": figures}
+        for d in labels.repeated:
+            print(f"                 labelled twice, counted once: ({d.center_xy[0]:.0f}, {d.center_xy[1]:.0f})"
+                  f" {d.diameter_px:.0f} px")
         if not args.no_person and labels.usable:
             start = time.perf_counter()
             person = compare_photo(photo, discs=labels_path)
@@ -311,8 +323,8 @@ def main(argv=None) -> int:
             # How many of the person's discs the measurement draws a usable outline for, at their places.
             mine["measured_usable"] = score_discs(labels, places(person.usable_discs), []).usable_found
             measured[0] += mine["measured_usable"]
-            measured[1] += len(labels.usable)
-            print(f"  person's discs ({len(labels.usable)}, {mine['measured_usable']} measured usable): "
+            measured[1] += len(labels.distinct_usable)
+            print(f"  person's discs ({len(labels.distinct_usable)}, {mine['measured_usable']} measured usable): "
                   f"{mine['answer']}  {mine['status']} -> {mine['verdict']}  [{mine['seconds']:.1f} s]")
             for line in mine["features"]:
                 print(f"                 {line}")
@@ -324,6 +336,7 @@ def main(argv=None) -> int:
         pooled.used, ", ".join(f"{n} {w}" for w, n in pooled.used_as.most_common()),
         "-" if pooled.junk_share is None else f"{pooled.junk_share:.1%}",
         "-" if figures["median_abs_diameter_error"] is None else f"{figures['median_abs_diameter_error']:.1%}"))
+    print(recall_by_kind(pooled))
     if measured[1]:
         print(f"the person's discs measured usable at their places: {measured[0]}/{measured[1]}")
     for who, counted in verdicts.items():

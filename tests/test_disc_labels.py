@@ -88,9 +88,32 @@ def test_match_needs_the_centre_and_the_size():
 
 
 def test_one_found_disc_matches_one_label():
-    labels = DiscLabels((LabelledDisc((100.0, 100.0), 40.0), LabelledDisc((104.0, 100.0), 40.0)))
-    score = score_discs(labels, [((102.0, 100.0), 40.0)], [])
+    # Two discs 11 px apart (each beyond the other's place: two discs, not one labelled twice); a disc found between
+    # them is at the place of either, and is one of them.
+    labels = DiscLabels((LabelledDisc((100.0, 100.0), 40.0), LabelledDisc((111.0, 100.0), 40.0)))
+    assert not labels.repeated
+    score = score_discs(labels, [((105.5, 100.0), 40.0)], [])
     assert score.usable_found == 1 and len(score.missed) == 1 and score.recall == 0.5
+
+
+def test_a_disc_labelled_twice_is_counted_once():
+    """Two labels of one disc (each at the other's place and of its size) are one disc: found once, it is found."""
+    labels = DiscLabels((LabelledDisc((100.0, 100.0), 40.0), LabelledDisc((103.0, 101.0), 41.0),
+                         LabelledDisc((112.0, 100.0), 40.0)))  # 12 px off: another disc
+    assert [d.center_xy for d in labels.repeated] == [(103.0, 101.0)]
+    assert len(labels.distinct_usable) == 2 and len(labels.usable) == 3
+    score = score_discs(labels, [((101.0, 100.0), 40.0)], [])
+    assert score.usable_labelled == 2 and score.usable_found == 1 and [d.center_xy for d in score.missed] == [(112.0, 100.0)]
+
+
+def test_recall_is_counted_by_the_label_s_kind():
+    labels = DiscLabels((LabelledDisc((100.0, 100.0), 40.0, "clean"), LabelledDisc((300.0, 100.0), 40.0, "faint"),
+                         LabelledDisc((500.0, 100.0), 40.0, "faint"), LabelledDisc((700.0, 100.0), 40.0, "ring", False)))
+    score = score_discs(labels, [((100.0, 100.0), 40.0), ((500.0, 100.0), 40.0)], [])
+    assert score.recall_by_kind() == {"clean": (1, 1), "faint": (1, 2)}  # the unusable ring is not counted
+    score += score_discs(labels, [], [])
+    assert score.recall_by_kind() == {"clean": (1, 2), "faint": (1, 4)}
+    assert score.to_json()["recall_by_kind"] == {"clean": [1, 2], "faint": [1, 4]}
 
 
 def test_used_discs_are_told_apart():

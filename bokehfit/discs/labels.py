@@ -105,6 +105,23 @@ class DiscLabels:
         """The discs a person reads the aperture from."""
         return tuple(d for d in self.discs if d.usable)
 
+    @property
+    def repeated(self) -> tuple[LabelledDisc, ...]:
+        """The usable discs labelled twice: each that is the same disc as one before it in the list (at its place and
+        of its size, each as the other's, :func:`matches`). A disc is one disc however often it is listed."""
+        kept: list[LabelledDisc] = []
+        again: list[LabelledDisc] = []
+        for d in self.usable:
+            same = any(matches(d.center_xy, d.diameter_px, k) and matches(k.center_xy, k.diameter_px, d) for k in kept)
+            (again if same else kept).append(d)
+        return tuple(again)
+
+    @property
+    def distinct_usable(self) -> tuple[LabelledDisc, ...]:
+        """The usable discs, each once (:attr:`repeated` left out): what recall is counted on."""
+        again = {id(d) for d in self.repeated}
+        return tuple(d for d in self.usable if id(d) not in again)
+
     def complete_at(self, xy) -> bool:
         """True where the lists are complete (inside one of ``complete_within``)."""
         x, y = xy
@@ -234,6 +251,13 @@ class DiscScore:
     diameter_errors: list[float] = field(default_factory=list)
     missed: list[LabelledDisc] = field(default_factory=list)  #: usable discs not found as usable
     junk_used: list[tuple[tuple[float, float], float, str]] = field(default_factory=list)  #: (centre, size, as what)
+    labelled_kinds: Counter = field(default_factory=Counter)  #: the labelled usable discs by kind
+
+    def recall_by_kind(self) -> dict[str, tuple[int, int]]:
+        """Per kind of labelled usable disc (DISC_KINDS' order): (found usable, labelled)."""
+        missed = Counter(d.kind for d in self.missed)
+        return {kind: (self.labelled_kinds[kind] - missed[kind], self.labelled_kinds[kind])
+                for kind in DISC_KINDS if self.labelled_kinds[kind]}
 
     @property
     def recall(self) -> float | None:
@@ -258,6 +282,7 @@ class DiscScore:
         self.diameter_errors += other.diameter_errors
         self.missed += other.missed
         self.junk_used += other.junk_used
+        self.labelled_kinds += other.labelled_kinds
         return self
 
     def to_json(self) -> dict:
@@ -266,7 +291,8 @@ class DiscScore:
                 "recall": None if self.recall is None else round(self.recall, 4), "used": self.used,
                 "used_as": dict(self.used_as), "junk": self.junk,
                 "junk_share": None if self.junk_share is None else round(self.junk_share, 4),
-                "median_abs_diameter_error": None if errors is None else round(float(np.median(errors)), 4)}
+                "median_abs_diameter_error": None if errors is None else round(float(np.median(errors)), 4),
+                "recall_by_kind": {kind: list(pair) for kind, pair in self.recall_by_kind().items()}}
 
 
 def score_discs(labels: DiscLabels, found, used) -> DiscScore:
@@ -281,9 +307,9 @@ def score_discs(labels: DiscLabels, found, used) -> DiscScore:
         The discs a fit used (what each is, is counted on these).
     """
     found, used = list(found), list(used)
-    usable = labels.usable
+    usable = labels.distinct_usable
     pairs = _pairs(found, usable)
-    score = DiscScore(len(usable), len(pairs), len(used))
+    score = DiscScore(len(usable), len(pairs), len(used), labelled_kinds=Counter(d.kind for d in usable))
     score.diameter_errors = [found[i][1] / usable[j].diameter_px - 1.0 for i, j in pairs.items()]
     hit = set(pairs.values())
     score.missed = [d for j, d in enumerate(usable) if j not in hit]
