@@ -33,7 +33,8 @@ It takes a fraction of the time of the whole run, for trying a change to the sea
 ``--sheets DIR`` also writes, per photo, a contact sheet (``DIR/NAME.sheet.png``) of what the table counts
 against the finder: each disc the fit used that is not a labelled disc, and each labelled usable disc missed
 with why, a tile each, with the search's outlines as the report draws them and the label's circle (yellow):
-a miss is read in seconds where its numbers take minutes. The sheets show the photos: keep them out of the repository (their licences, ``reference_photos/MANIFEST.md``).
+a miss is read in seconds where its numbers take minutes. The sheets show the photos: keep them out of the
+repository (their licences, ``reference_photos/MANIFEST.md``).
 
 ``--at-places`` measures each labelled usable disc and each labelled non-disc at its own place and
 size, as the search measures a place, and counts those that pass its tests of a disc: whether a miss

@@ -19,6 +19,7 @@ import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 
+from bokehfit.clock import Clock
 from bokehfit.discs.measure import RESOLVABLE_PX, Measurement
 from bokehfit.discs.reasons import NoDisc, Reason
 from bokehfit.errors import InputError, check_finite
@@ -254,14 +255,13 @@ def _check_parameters(shape, clipped, min_diameter_px, max_diameter_px, max_disc
 
 
 def _discs_of(measurements, found, rejected, start, notes, rejections, max_discs, given: bool = False,
-              soft=(), timing_s: dict[str, float] | None = None) -> DiscSearch:
+              soft=(), clock: Clock | None = None) -> DiscSearch:
     """The search's discs from its measurements: one per disc, largest first, each with what it offers (``given``:
     the places were a person's, :attr:`DiscSearch.given`). ``soft``: the soft-edged discs the search measured
     ((measurement, its rejection) each, :func:`bokehfit.discs.verdict.soft_edged`), kept as discs of the second
     tier where they lie clear of every sharp disc (:func:`_clear_of`): their rejections leave ``rejections`` and
-    ``rejected``. The sharp discs are made from their own measurements alone, as without them. ``timing_s``: the
-    search's steps' seconds so far (:attr:`DiscSearch.timing_s`), to which this one's ("result") is added."""
-    made_from = time.perf_counter()
+    ``rejected``. The sharp discs are made from their own measurements alone, as without them. ``clock``: the
+    search's steps timed so far (:attr:`DiscSearch.timing_s`), to which this one ("result") is added."""
     measurements = _distinct_measurements(measurements)
     measurements.sort(key=lambda m: -m.diameter_px)
     if max_discs is not None:
@@ -280,9 +280,10 @@ def _discs_of(measurements, found, rejected, start, notes, rejections, max_discs
             if id(r) in dropped:
                 rejected[r.rejected_because] -= 1
         rejections = [r for r in rejections if id(r) not in dropped]
-    end = time.perf_counter()
-    steps = {**(timing_s or {}), "result": end - made_from}
-    return DiscSearch(discs, found, +rejected, end - start, tuple(notes), tuple(rejections), given, steps)
+    if clock is not None:
+        clock("result")
+    return DiscSearch(discs, found, +rejected, time.perf_counter() - start, tuple(notes), tuple(rejections), given,
+                      dict(clock.timing) if clock is not None else {})
 
 
 def _same_disc(m: Measurement, other: Measurement) -> bool:

@@ -360,7 +360,8 @@ def measure_rays(
         if isinstance(traced, NoDisc):
             return traced
         outline, seen, levels = traced
-        found = Outlined(Window(r0, c0, r1, c1), crop, levels, outline, False, None, ~seen, smooth, noise)
+        found = Outlined(Window(r0, c0, r1, c1), crop, levels, outline, False, None, ~seen,
+                         smoothing_px=smooth, pixel_noise=noise)
         area, cx, cy = polygon_area_centroid(outline)
         if area <= 0:
             return NoDisc(Reason.NO_OUTLINE)

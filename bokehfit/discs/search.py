@@ -183,8 +183,7 @@ def find_discs(
     measurements = _by_own_steps(luminance, clipped, measurements, min_diameter_px)
     soft = [(m, rejection) for m, rejection in soft if light_ends(luminance, m)]  # a glow's tail goes on
     clock("own steps")
-    return _discs_of(measurements, found, rejected, start, notes, rejections, max_discs, soft=soft, timing_s=clock.timing)
-
+    return _discs_of(measurements, found, rejected, start, notes, rejections, max_discs, soft=soft, clock=clock)
 
 
 def _candidates(luminance, min_diameter_px: float, search_max_px: float, rejected: Counter,
