@@ -137,6 +137,48 @@ def test_overlapping_discs_are_split_into_a_cluster():
     assert (np.abs(own[:, 0] - centres[1][0]) > 0.5 * 56.0).any()  # inside the neighbours' light
 
 
+#: A small disc on a large one's edge (a near light's disc over a far one's, or the other way round): the
+#: small one's centre is no peak of their union's distance transform (its depth, its radius, is under half
+#: the large one's), so only the outline's arcs between its cusps tell the two apart. (diameters, centre
+#: distance, brightnesses): the same light, the small one dimmer, the small one brighter.
+SMALL_ON_LARGE = [((100, 40), 45, (0.5, 0.5)), ((100, 40), 45, (0.5, 0.3)), ((100, 50), 50, (0.4, 0.6))]
+
+
+def small_on_large(diameters, distance, values):
+    centres = [(100.3, 110.6), (100.3 + distance, 110.6 + 0.2 * distance)]
+    image = np.full((220, 260), 0.04, dtype=np.float32)
+    for centre, diameter, value in zip(centres, diameters, values):
+        image = draw_disc(image, centre, diameter, value)
+    return finish(image)[0], centres
+
+
+@pytest.mark.parametrize("diameters, distance, values", SMALL_ON_LARGE)
+def test_a_small_disc_on_a_large_ones_edge_is_split_from_it(diameters, distance, values):
+    luminance, centres = small_on_large(diameters, distance, values)
+    search = find_discs(luminance)
+    found = [nearest(search.discs, c) for c in centres]
+    assert len({id(d) for d in found}) == 2, [(d.center_xy, d.diameter_px) for d in search.discs]
+    for disc, centre, diameter in zip(found, centres, diameters):
+        assert_measured(disc, centre, diameter)
+    assert len(search.discs) == 2  # and no disc of their union
+
+
+def test_a_step_traced_round_two_discs_is_split_into_them():
+    """An outline along rays that runs round a disc's neighbour too (a soft edge's step found on the far side of
+    both) is the union's: the disc asked for is the one of its parts at the place (places._split_steps)."""
+    from bokehfit.discs.places import _split_steps
+    from bokehfit.discs.reasons import NoDisc, Reason
+
+    diameters = (100, 40)
+    luminance, centres = small_on_large(diameters, 45, (0.5, 0.5))
+    union = measure_candidate(luminance, None, (120.0, 114.0), 110.0, 60.0, MIN_NOISE, 8.0)
+    assert union.reason is None and union.diameter_px > 1.02 * drawn_diameter(diameters[0])  # the two as one
+    for centre, diameter in zip(centres, diameters):
+        assert_measured(_split_steps(union, centre, diameter), centre, diameter)
+    none = NoDisc(Reason.FAINT)
+    assert _split_steps(none, centres[0], diameters[0]) is none
+
+
 def test_disc_crossed_by_a_branch_is_kept_with_the_crossing_unseen():
     centre = (120.3, 110.8)
     image = np.full((220, 240), 0.04, dtype=np.float32)

@@ -136,18 +136,25 @@ def _outline(crop: np.ndarray, level: float, background: float, seed_rc: tuple[f
 
 def _deep_concavities(outline: np.ndarray, depth_px: float) -> int:
     """Number of concavities of the outline deeper than ``depth_px``."""
+    return len(concavities(outline, depth_px))
+
+
+def concavities(outline: np.ndarray, depth_px: float) -> np.ndarray:
+    """The indices into ``outline`` of the deepest point of each of its concavities deeper than ``depth_px``
+    (its convexity defects), in the outline's order."""
     fixed = np.round(outline * _SUBPIXEL).astype(np.int32)  # OpenCV wants integer points
     hull = cv2.convexHull(fixed, returnPoints=False)
     if len(hull) < 3:
-        return 0
+        return np.zeros(0, dtype=int)
     try:
         defects = cv2.convexityDefects(fixed, np.sort(hull, axis=0))
     except cv2.error:  # a self-touching outline whose hull is not monotone
-        return 0
+        return np.zeros(0, dtype=int)
     if defects is None:
-        return 0
-    depths = defects.reshape(-1, 4)[:, 3] / (256.0 * _SUBPIXEL)  # depth is 24.8 fixed point
-    return int((depths > depth_px).sum())
+        return np.zeros(0, dtype=int)
+    defects = defects.reshape(-1, 4)
+    depths = defects[:, 3] / (256.0 * _SUBPIXEL)  # depth is 24.8 fixed point
+    return np.sort(defects[depths > depth_px, 2].astype(int))
 
 
 def polygon_area_centroid(xy: np.ndarray) -> tuple[float, float, float]:

@@ -148,16 +148,24 @@ def _stepped(luminance, clipped, xy, diameter: float, min_diameter_px: float, re
     disc well inside its edge from being taken for the edge. Where the edge lies outside it (the corners of a
     triangle or a slit read a little small, a soap bubble read larger than its step) the rays there find no step
     in it, or no disc at all, and the wide band's disc is kept."""
-    wide = measure_rays(luminance, clipped, xy, diameter, MIN_NOISE, min_diameter_px)
+    wide = _split_steps(measure_rays(luminance, clipped, xy, diameter, MIN_NOISE, min_diameter_px), xy, diameter)
     if not read:
         return wide
-    narrow = measure_rays(luminance, clipped, xy, diameter, MIN_NOISE, min_diameter_px, asked_band(diameter))
+    narrow = _split_steps(measure_rays(luminance, clipped, xy, diameter, MIN_NOISE, min_diameter_px,
+                                       asked_band(diameter)), xy, diameter)
     if not isinstance(narrow, Measurement) or narrow.reason is not None:
         return wide
     if not isinstance(wide, Measurement) or wide.reason is not None:
         return narrow
     nearer = abs(math.log(narrow.diameter_px / diameter)) < abs(math.log(wide.diameter_px / diameter))
     return narrow if nearer and narrow.outline_reliable.mean() >= wide.outline_reliable.mean() else wide
+
+
+def _split_steps(m: Measurement | NoDisc, xy, diameter: float) -> Measurement | NoDisc:
+    """A disc measured by its own step along rays, or where that step runs round its neighbours too (the outer edge
+    of discs that overlap, each a step down to the ground), the one of their discs nearest the place
+    (:func:`_nearest_part`)."""
+    return _nearest_part(m, xy, diameter) if isinstance(m, Measurement) and m.reason is None else m
 
 
 def _near_place(m: Measurement, xy, diameter: float) -> bool:
@@ -173,14 +181,20 @@ def _contour_at_place(luminance, clipped, xy, diameter: float, min_diameter_px: 
     m = measure_candidate(luminance, clipped, xy, diameter, 0.5 * diameter, MIN_NOISE, min_diameter_px)
     if isinstance(m, NoDisc):
         return m
-    parts = [m] + (split_cluster(m) if m.overlaps and m.diameter_px >= 2.0 * RESOLVABLE_PX else [])
-    m = min(parts, key=lambda p: math.hypot(p.center_xy[0] - xy[0], p.center_xy[1] - xy[1]) / diameter
-            + abs(math.log(p.diameter_px / diameter)))
+    m = _nearest_part(m, xy, diameter)
     if not _near_place(m, xy, diameter):
         return NoDisc(Reason.NOT_THE_DISC_ASKED,
                       f"the outline measured there ({m.diameter_px:.0f} px at {m.center_xy[0]:.0f},"
                       f" {m.center_xy[1]:.0f}) is not a disc of about {diameter:.0f} px")
     return m
+
+
+def _nearest_part(m: Measurement, xy, diameter: float) -> Measurement:
+    """``m``, or where it is a blob of overlapping discs (:func:`bokehfit.discs.measure.split_cluster`), the one of its
+    discs nearest a disc of ``diameter`` at ``xy`` (or ``m`` itself, where it is nearer)."""
+    parts = [m] + (split_cluster(m) if m.diameter_px >= 2.0 * RESOLVABLE_PX else [])
+    return min(parts, key=lambda p: math.hypot(p.center_xy[0] - xy[0], p.center_xy[1] - xy[1]) / diameter
+               + abs(math.log(p.diameter_px / diameter)))
 
 
 def _by_own_steps(luminance, clipped, measurements: list[Measurement], min_diameter_px: float) -> list[Measurement]:
@@ -196,7 +210,8 @@ def _by_own_steps(luminance, clipped, measurements: list[Measurement], min_diame
         if m.own_step or not len(reliable) or not MIN_OUTLINE_SEEN <= reliable.mean() < MIN_FIT_SEEN \
                 or m.diameter_px < RESOLVABLE_PX:
             continue  # only a disc whose contour shows at least half its outline as its own
-        stepped = measure_rays(luminance, clipped, m.center_xy, m.diameter_px, MIN_NOISE, min_diameter_px)
+        stepped = _split_steps(measure_rays(luminance, clipped, m.center_xy, m.diameter_px, MIN_NOISE, min_diameter_px),
+                               m.center_xy, m.diameter_px)
         if isinstance(stepped, Measurement) and stepped.reason is None and _near_place(stepped, m.center_xy, m.diameter_px) \
                 and _same_size(stepped.diameter_px, m.diameter_px) and stepped.outline_reliable.mean() > reliable.mean():
             again[i] = stepped

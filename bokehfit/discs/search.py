@@ -342,7 +342,7 @@ def _measure_cluster(scales: PhotoScales, candidate: Candidate, min_diameter_px:
     """A cluster candidate measured as a whole and split into its discs of the sizes sought; a
     rejection (``Reason.NOT_A_CLUSTER``) where it has none."""
     m = _measured_at_scale(scales, candidate, min_diameter_px, cluster=True)
-    parts = [] if isinstance(m, NoDisc) else split_cluster(m)
+    parts = [] if isinstance(m, NoDisc) else split_cluster(m, cluster=True)
     parts = [p for p in parts if min_diameter_px <= p.diameter_px <= max_diameter_px]
     if parts:
         return _Measured(m.outline_xy, parts)
@@ -373,7 +373,7 @@ def _measure_blob(scales: PhotoScales, candidate: Candidate, min_diameter_px: fl
         rejection = Rejection.of(m.center_xy, m.diameter_px, reason)
         return (m, rejection) if _soft_disc(m, max_diameter_px) else rejection
     # A blob of overlapping discs is measured as its discs, each with the outline it shows.
-    parts = split_cluster(m) if m.overlaps and m.diameter_px >= 2.0 * RESOLVABLE_PX else []
+    parts = split_cluster(m) if m.diameter_px >= 2.0 * RESOLVABLE_PX else []
     if not parts:
         return _Measured(m.outline_xy, [m])
     return _Measured(m.outline_xy, [p for p in parts if min_diameter_px <= p.diameter_px <= max_diameter_px])
