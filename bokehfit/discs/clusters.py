@@ -32,8 +32,9 @@ SPLIT_JUNCTION_PX = 2.0
 SPLIT_MAX_MISFIT_REL = 0.08
 SPLIT_MIN_ARC = 0.35
 SPLIT_MIN_INSIDE = 0.85
-#: Discs that overlap by more than about half their radius leave their union's distance transform one ridge,
-#: not a peak each; their union's outline is still their arcs, meeting where it turns inward (a concavity
+#: Discs whose centres lie closer than half their radius, or a small disc on a large one's edge (its centre's
+#: depth, its own radius, under half the large one's), make no peak of their own in their union's distance
+#: transform; their union's outline is still their arcs, meeting where it turns inward (a concavity
 #: deeper than the blob's outline noise: :data:`bokehfit.discs.verdict.OVERLAP_DEFECT_DEPTH`, as a blob of
 #: overlapping discs is told). Between two such cusps the outline is one disc's edge; arcs of one disc on
 #: both sides of another (the middle disc of a chain, a disc notched by a stem) are joined where one circle
@@ -64,8 +65,9 @@ def split_cluster(m: Measurement, cluster: bool = False) -> list[Measurement]:
     cusps where it turns inward are the discs' edges (:func:`_parts_by_arcs`). The
     watershed is tried where the measurement flags the blob ``overlaps`` or the search
     found it a ``cluster`` (:attr:`bokehfit.discs.candidates.Candidate.cluster`); the arcs
-    wherever its outline has those cusps (a chain's outline turns inward at every
-    junction, more often than ``overlaps`` counts, so as not to take a star for discs).
+    wherever its outline has two to ARC_MAX_CUSPS cusps (``overlaps`` counts two to four
+    concavities, not to take a star's five for discs: a chain of three or more discs has
+    more, and a star's arcs are no circles).
     """
     origin = np.floor(m.outline_xy.min(axis=0)) - 2.0
     local = m.outline_xy - origin
@@ -168,8 +170,8 @@ def _parts_by_arcs(local: np.ndarray, cusps: np.ndarray, mask: np.ndarray, seen_
             parts.append((own, fitted))
     # Where discs overlap, their union's outline lies on each one's circle and outside the others': an arc
     # inside another's circle is the outline cutting through that disc's light, not a disc's own edge.
-    parts = [(own, fitted) for own, fitted in parts
-             if not any(_inside_share(local[own], other) > ARC_MAX_INSIDE_SHARE for o, other in parts if o is not own)]
+    parts = [(own, fitted) for i, (own, fitted) in enumerate(parts)
+             if not any(_inside_share(local[own], other) > ARC_MAX_INSIDE_SHARE for j, (_, other) in enumerate(parts) if j != i)]
     if len(parts) < 2 or sum(own.sum() for own, _ in parts) < ARC_MIN_OUTLINE_SHARE * seen_before.sum():
         return []  # the arcs left are not most of the blob's outline: not discs run together
     return parts
