@@ -89,15 +89,15 @@ def test_a_size_is_sought_again_only_where_discs_have_it():
 
 @pytest.mark.parametrize("name, least", [("02_dew-glints_aaron-burden.jpg", 25),
                                          ("07_touch-the-light_canon-50d-ef100.jpg", 7),
-                                         ("12_bokeh-lights_sebastian-muller.jpg", 5)])
+                                         ("12_bokeh-lights_sebastian-muller.jpg", 6)])
 def test_real_overlapping_discs_are_found_by_their_edges(reference_photo, name, least):
     """Photo 02's large dew discs, many touching, and photo 07's heavily overlapping 170-210 px discs:
     the blob search alone found 15 of 41 and 4 of 13 of the discs a person labelled usable; with the
     edge circles and the measurement along rays, 27 and 8. Photo 12's chain of 285-360 px discs: 5 of
-    15 with the edge circles, 7 with the circles of the sizes found; 5 since outlines round two discs are split
+    15 with the edge circles, 7 with the circles of the sizes found; 6 since outlines round two discs are split
     into them (bokehfit.discs.clusters): two of the 7 were such outlines, a 432-px one round the green and the
     peach disc and a 354-px one round the red-pink disc and the salmon one's near side, each within the match's
-    tolerance of one of the pair, and the pairs' discs show under 75 % of their outline as their own."""
+    tolerance of one of the pair, and most of the pairs' discs show under 75 % of their outline as their own."""
     from photo_factory import reference_labels
 
     from bokehfit.io import load_photo

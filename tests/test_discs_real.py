@@ -163,6 +163,27 @@ def test_a_small_disc_on_a_large_ones_edge_is_split_from_it(diameters, distance,
     assert len(search.discs) == 2  # and no disc of their union
 
 
+@pytest.mark.parametrize("seed", range(8))
+def test_a_disc_whose_edge_wanders_is_not_cut_at_its_dents(seed):
+    """A real disc's edge wanders by several per cent of its radius (dust, the blades' play, the tone curve): its
+    outline's dents are concavities, but the arcs between them fit one circle about as well as each its own, so
+    the outline is one disc's, not discs run together. Drawn: harmonics 2, 4, 5 and 7 of 4 % each at random
+    phases (the outlines of tests/test_fit_blades_shown.py), filled at 8× and area-averaged."""
+    rng = np.random.default_rng(seed)
+    theta = np.linspace(0.0, 2.0 * math.pi, 720, endpoint=False)
+    r = 1.0 + sum(0.04 * rng.normal() * np.cos(k * theta + rng.uniform(0.0, 2.0 * math.pi)) for k in (2, 4, 5, 7))
+    scale, side, centre = 8, 140, (70.3, 69.6)
+    big = np.zeros((side * scale, side * scale), np.uint8)
+    outline = np.stack([centre[0] + 40.0 * r * np.cos(theta), centre[1] + 40.0 * r * np.sin(theta)], axis=1)
+    cv2.fillPoly(big, [np.round((outline + 0.5) * scale - 0.5).astype(np.int32)], 255)
+    light = cv2.resize(big.astype(np.float32) / 255.0, (side, side), interpolation=cv2.INTER_AREA)
+    luminance, _ = finish(0.05 + 0.5 * light)
+    search = find_discs(luminance)
+    assert len(search.discs) == 1, [(d.center_xy, d.diameter_px) for d in search.discs]
+    drawn = 2.0 * math.sqrt(float(light.sum()) / math.pi)
+    assert abs(search.discs[0].diameter_px - drawn) <= DIAMETER_TOL_REL * drawn
+
+
 def test_a_step_traced_round_two_discs_is_split_into_them():
     """An outline along rays that runs round a disc's neighbour too (a soft edge's step found on the far side of
     both) is the union's: the disc asked for is the one of its parts at the place (places._split_steps)."""

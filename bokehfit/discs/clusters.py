@@ -39,17 +39,25 @@ SPLIT_MIN_INSIDE = 0.85
 #: overlapping discs is told). Between two such cusps the outline is one disc's edge; arcs of one disc on
 #: both sides of another (the middle disc of a chain, a disc notched by a stem) are joined where one circle
 #: fits their points within ARC_JOIN_MISFIT_REL of its radius (rms; a polygon's sides stay within 0.05 of
-#: their equal-area circle's, so a polygon's arcs may stay apart and the split then fails its tests). The
+#: their equal-area circle's, so a polygon's arcs may stay apart and the split then fails its tests), or within
+#: ARC_JOIN_RATIO times the worse of their own circles' misfits: the arcs between the dents of one disc's
+#: wandering edge fit one circle about as well as each its own (drawn outlines wandering by 8 % of the radius:
+#: 0.8–1.7 times), two discs' arcs several times worse (3–10 times on photo 12's and drawn unions). The
 #: points within ARC_JUNCTION_REL of the blob's radius (and SPLIT_JUNCTION_PX) of a cusp are the junction,
 #: blurred by the edge. At most ARC_MAX_CUSPS cusps (a chain of five discs has eight). An arc is a disc's edge
 #: where it passes a part's tests (SPLIT_MAX_MISFIT_REL, SPLIT_MIN_ARC, SPLIT_MIN_INSIDE) and lies inside no
 #: other part's circle (at most ARC_MAX_INSIDE_SHARE of it): the others are the outline cutting through light.
-#: The discs' arcs must be ARC_MIN_OUTLINE_SHARE of the outline seen, two discs or more.
+#: The discs' arcs must be ARC_MIN_OUTLINE_SHARE of the outline seen, two discs or more, and their circles cover
+#: ARC_MIN_COVER of the blob: the dents of one disc's wandering outline (a real disc's edge wanders by several
+#: per cent of its radius) cut it into arcs of smaller circles that leave its middle out; the circles of discs
+#: run together cover their union (beyond it only where the outline cut through a neighbour's light).
 ARC_JOIN_MISFIT_REL = 0.03
+ARC_JOIN_RATIO = 2.0
 ARC_JUNCTION_REL = 0.03
 ARC_MAX_CUSPS = 8
 ARC_MAX_INSIDE_SHARE = 0.2
 ARC_MIN_OUTLINE_SHARE = 0.5
+ARC_MIN_COVER = 0.9
 
 
 def split_cluster(m: Measurement, cluster: bool = False) -> list[Measurement]:
@@ -147,18 +155,22 @@ def _parts_by_arcs(local: np.ndarray, cusps: np.ndarray, mask: np.ndarray, seen_
     arc_of = np.searchsorted(cusps, np.arange(len(local)), side="right") % len(cusps)  # between cusps k-1 and k
     groups = [np.flatnonzero((arc_of == k) & ~near_cusp & seen_before) for k in range(len(cusps))]
     groups = [g for g in groups if len(g) >= SPLIT_MIN_POINTS]
+    alone = [_misfit(local[g]) for g in groups]
+    alone = [misfit / max(fitted.radius, 1e-9) for fitted, misfit in alone]
     while len(groups) > 1:  # join the two arcs that one circle fits best, while it fits them
         best = None
         for i in range(len(groups)):
             for j in range(i + 1, len(groups)):
                 joined = np.concatenate([groups[i], groups[j]])
                 fitted, misfit = _misfit(local[joined])
-                if misfit <= ARC_JOIN_MISFIT_REL * fitted.radius and (best is None or misfit < best[0]):
-                    best = (misfit, i, j, joined)
+                rel = misfit / max(fitted.radius, 1e-9)
+                if rel <= max(ARC_JOIN_MISFIT_REL, ARC_JOIN_RATIO * max(alone[i], alone[j])) and (best is None or rel < best[0]):
+                    best = (rel, i, j, joined)
         if best is None:
             break
-        groups[best[1]] = best[3]
-        del groups[best[2]]
+        rel, i, j, joined = best
+        groups[i], alone[i] = joined, rel
+        del groups[j], alone[j]
     if len(groups) < 2:
         return []
     parts = []
@@ -174,6 +186,13 @@ def _parts_by_arcs(local: np.ndarray, cusps: np.ndarray, mask: np.ndarray, seen_
              if not any(_inside_share(local[own], other) > ARC_MAX_INSIDE_SHARE for j, (_, other) in enumerate(parts) if j != i)]
     if len(parts) < 2 or sum(own.sum() for own, _ in parts) < ARC_MIN_OUTLINE_SHARE * seen_before.sum():
         return []  # the arcs left are not most of the blob's outline: not discs run together
+    rows, cols = np.ogrid[: mask.shape[0], : mask.shape[1]]
+    union = np.zeros(mask.shape, bool)
+    for _, fitted in parts:
+        union |= np.hypot(cols - fitted.cx, rows - fitted.cy) <= fitted.radius
+    blob = mask.astype(bool)
+    if (union & blob).sum() < ARC_MIN_COVER * blob.sum():
+        return []  # the circles leave the blob's light unexplained: the dents of one disc's wandering outline
     return parts
 
 
