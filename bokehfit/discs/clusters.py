@@ -155,15 +155,13 @@ def _parts_by_arcs(local: np.ndarray, cusps: np.ndarray, mask: np.ndarray, seen_
     arc_of = np.searchsorted(cusps, np.arange(len(local)), side="right") % len(cusps)  # between cusps k-1 and k
     groups = [np.flatnonzero((arc_of == k) & ~near_cusp & seen_before) for k in range(len(cusps))]
     groups = [g for g in groups if len(g) >= SPLIT_MIN_POINTS]
-    alone = [_misfit(local[g]) for g in groups]
-    alone = [misfit / max(fitted.radius, 1e-9) for fitted, misfit in alone]
+    alone = [_misfit(local[g])[1] for g in groups]
     while len(groups) > 1:  # join the two arcs that one circle fits best, while it fits them
         best = None
         for i in range(len(groups)):
             for j in range(i + 1, len(groups)):
                 joined = np.concatenate([groups[i], groups[j]])
-                fitted, misfit = _misfit(local[joined])
-                rel = misfit / max(fitted.radius, 1e-9)
+                rel = _misfit(local[joined])[1]
                 if rel <= max(ARC_JOIN_MISFIT_REL, ARC_JOIN_RATIO * max(alone[i], alone[j])) and (best is None or rel < best[0]):
                     best = (rel, i, j, joined)
         if best is None:
@@ -186,10 +184,9 @@ def _parts_by_arcs(local: np.ndarray, cusps: np.ndarray, mask: np.ndarray, seen_
              if not any(_inside_share(local[own], other) > ARC_MAX_INSIDE_SHARE for j, (_, other) in enumerate(parts) if j != i)]
     if len(parts) < 2 or sum(own.sum() for own, _ in parts) < ARC_MIN_OUTLINE_SHARE * seen_before.sum():
         return []  # the arcs left are not most of the blob's outline: not discs run together
-    rows, cols = np.ogrid[: mask.shape[0], : mask.shape[1]]
     union = np.zeros(mask.shape, bool)
     for _, fitted in parts:
-        union |= np.hypot(cols - fitted.cx, rows - fitted.cy) <= fitted.radius
+        union |= _circle_pixels(mask.shape, fitted)
     blob = mask.astype(bool)
     if (union & blob).sum() < ARC_MIN_COVER * blob.sum():
         return []  # the circles leave the blob's light unexplained: the dents of one disc's wandering outline
@@ -210,15 +207,21 @@ def _round_part(local: np.ndarray, own: np.ndarray, mask: np.ndarray):
     fitted, misfit = _misfit(local[own])
     turns = np.arctan2(local[own, 1] - fitted.cy, local[own, 0] - fitted.cx)
     arc = len(np.unique(((turns + math.pi) / (2 * math.pi) * 32).astype(int) % 32)) / 32
-    rows, cols = np.ogrid[: mask.shape[0], : mask.shape[1]]
-    circle = np.hypot(cols - fitted.cx, rows - fitted.cy) <= fitted.radius
+    circle = _circle_pixels(mask.shape, fitted)
     inside = float(mask[circle].mean()) if circle.any() else 0.0
-    if misfit > SPLIT_MAX_MISFIT_REL * fitted.radius or arc < SPLIT_MIN_ARC or inside < SPLIT_MIN_INSIDE:
+    if misfit > SPLIT_MAX_MISFIT_REL or arc < SPLIT_MIN_ARC or inside < SPLIT_MIN_INSIDE:
         return None
     return fitted
 
 
 def _misfit(xy: np.ndarray):
-    """The circle through ``xy`` and the rms distance of the points from it."""
+    """The circle through ``xy`` and the rms distance of the points from it over its radius."""
     fitted = _fit_circle(xy)
-    return fitted, float(np.sqrt(np.mean((np.hypot(xy[:, 0] - fitted.cx, xy[:, 1] - fitted.cy) - fitted.radius) ** 2)))
+    rms = math.sqrt(float(np.mean((np.hypot(xy[:, 0] - fitted.cx, xy[:, 1] - fitted.cy) - fitted.radius) ** 2)))
+    return fitted, rms / max(fitted.radius, 1e-9)
+
+
+def _circle_pixels(shape: tuple[int, int], circle) -> np.ndarray:
+    """The pixels of an image of ``shape`` whose centres lie inside ``circle``."""
+    rows, cols = np.ogrid[: shape[0], : shape[1]]
+    return np.hypot(cols - circle.cx, rows - circle.cy) <= circle.radius
