@@ -15,6 +15,8 @@ from bokehfit.discs import find_discs
 from bokehfit.discs.circles import (
     MIN_DIAMETER_PX,
     SIZED_MIN_DISCS,
+    SMOOTH_REDUCE_SIGMA,
+    _smoothed,
     find_circles,
     find_sized_circles,
 )
@@ -54,6 +56,26 @@ def test_no_circle_in_noise_or_a_smooth_swell():
     swell = 0.4 * (1 + 0.04 * np.exp(-((xx - 200) ** 2 + (yy - 150) ** 2) / (2 * 40.0 ** 2)))
     image = (swell + rng.normal(0, 0.004, swell.shape)).astype(np.float32)
     assert find_circles(image, 8.0, 500.0) == []
+
+
+@pytest.mark.parametrize("sigma", [2.0 * SMOOTH_REDUCE_SIGMA, 16.0, 32.0])
+def test_a_wide_blur_on_a_reduced_copy_is_the_gaussian(sigma):
+    """The band's local mean and spread, blurred on a reduced copy, are OpenCV's Gaussian blur of the
+    whole copy to a hundredth of the light's spread about it, on texture at every scale from the
+    pixel's to the blur's (away from the border, where the two extend the image differently)."""
+    rng = np.random.default_rng(3)
+    image = sum(cv2.GaussianBlur(rng.random((600, 800)).astype(np.float32), (0, 0), s) * s
+                for s in (0.5, 3.0, 12.0, 40.0)).astype(np.float32)
+    exact = cv2.GaussianBlur(image, (0, 0), sigma)
+    inner = (slice(int(3 * sigma), -int(3 * sigma)),) * 2
+    error = np.abs(_smoothed(image, sigma) - exact)[inner].max()
+    assert error < 0.01 * float(np.std((image - exact)[inner])), error
+
+
+def test_a_narrow_blur_is_the_gaussian_itself():
+    image = np.random.default_rng(4).random((120, 160)).astype(np.float32)
+    sigma = 1.9 * SMOOTH_REDUCE_SIGMA
+    assert np.array_equal(_smoothed(image, sigma), cv2.GaussianBlur(image, (0, 0), sigma))
 
 
 def test_small_discs_are_left_to_the_blob_search():

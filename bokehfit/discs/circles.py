@@ -25,7 +25,8 @@ neighbours their discs. On
 the copy's logarithm (a disc of 5 % contrast over bright haze steps as much as
 one of 5 % over a dark ground; ``LOG_FLOOR`` keeps the dark's noise from
 becoming steps), less its mean at the band's scale and over its local spread
-(``SPREAD_CODES`` codes a standard deviation, the spread at least ``MIN_SPREAD``), OpenCV's Hough gradient
+(``SPREAD_CODES`` codes a standard deviation, the spread at least ``MIN_SPREAD``; both blurs of the band's
+scale made on a coarser copy, :func:`_smoothed`), OpenCV's Hough gradient
 transform (``HOUGH_GRADIENT_ALT``, which scores each circle by how much of it
 the edges follow, 0–1) keeps the circles followed over at least
 ``MIN_PERFECTNESS`` of their length. Each is a place to measure
@@ -81,6 +82,8 @@ CANNY_HIGH = 100.0
 #: Least local spread of the logarithm: on smooth ground a swell of the light fainter than this (haze, a
 #: toned sky, JPEG's smooth gradients) is not stretched to the codes of a step.
 MIN_SPREAD = 0.02
+#: Blurs of this standard deviation (px) or more are made on a reduced copy (:func:`_smoothed`).
+SMOOTH_REDUCE_SIGMA = 4.0
 #: A tile whose light varies mostly at scales under FINE_SCALE of the band's smallest disc (more than
 #: MAX_FINE_SHARE of the variance about its local mean) shows texture, not discs of the band: a carpet
 #: of small glints or grass, where every pixel is an edge and the transform's work has no bound.
@@ -115,11 +118,26 @@ SIZED_MIN_SHARE = 0.5
 SIZED_RADIUS_STEP_PX = 0.75
 
 
+def _smoothed(image: np.ndarray, sigma_px: float) -> np.ndarray:
+    """``image`` blurred by a Gaussian of ``sigma_px``: from SMOOTH_REDUCE_SIGMA on, on a copy area-averaged by
+    ``sigma_px`` / SMOOTH_REDUCE_SIGMA and brought back by linear interpolation (a blur that wide holds nothing
+    the coarser grid misses; the averaging and the interpolation add about a quarter of the square of the
+    reduction to its variance, taken from the Gaussian's)."""
+    factor = int(sigma_px // SMOOTH_REDUCE_SIGMA)
+    if factor < 2:
+        return cv2.GaussianBlur(image, (0, 0), sigma_px)
+    height, width = image.shape
+    size = (max(1, round(width / factor)), max(1, round(height / factor)))
+    small = cv2.resize(image, size, interpolation=cv2.INTER_AREA)
+    small = cv2.GaussianBlur(small, (0, 0), math.sqrt(sigma_px * sigma_px - 0.25 * factor * factor) / factor)
+    return cv2.resize(small, (width, height), interpolation=cv2.INTER_LINEAR)
+
+
 def _normalised(copy: np.ndarray, scale_px: float) -> np.ndarray:
     """The copy's logarithm less its local mean, over its local spread, as 8-bit codes about 128."""
     logged = np.log(copy.astype(np.float32) + LOG_FLOOR)
-    residual = logged - cv2.GaussianBlur(logged, (0, 0), scale_px)
-    spread = np.maximum(np.sqrt(cv2.GaussianBlur(residual * residual, (0, 0), scale_px)), MIN_SPREAD)
+    residual = logged - _smoothed(logged, scale_px)
+    spread = np.maximum(np.sqrt(np.maximum(_smoothed(residual * residual, scale_px), 0.0)), MIN_SPREAD)
     return np.clip(residual / spread * SPREAD_CODES + 128.0, 0, 255).astype(np.uint8)
 
 
@@ -127,7 +145,7 @@ def _fine_share(copy: np.ndarray, side: float) -> float:
     """Share of the copy's variance about its local mean (at the band's scale) that lies at scales
     under FINE_SCALE · ``side``."""
     image = copy.astype(np.float32)
-    coarse = image - cv2.GaussianBlur(image, (0, 0), side)
+    coarse = image - _smoothed(image, side)
     fine = image - cv2.GaussianBlur(image, (0, 0), FINE_SCALE * side)
     total = float(np.mean(coarse * coarse))
     return float(np.mean(fine * fine)) / total if total > 0 else 0.0
