@@ -27,7 +27,8 @@ from bokehfit.fit import ApertureFit, FitOptions, fit_aperture
 from bokehfit.gpu import AdapterChoice
 from bokehfit.io import Photo, load_photo
 from bokehfit.io.colour import luminance_weights
-from bokehfit.judging import FAINT_CONTRAST_REL, MIN_ACCEPTABLE_IOU, MIN_SURE_DISCS, MIN_SURE_IOU, SMALL_DISC_PX, judge
+from bokehfit.fit.features import FAINT_CONTRAST_REL, SMALL_DISC_PX
+from bokehfit.judging import MIN_ACCEPTABLE_IOU, MIN_SURE_DISCS, MIN_SURE_IOU, judge
 from bokehfit.kernels import AUTO, Kernel, compute_kernel
 from bokehfit.kernels.exact import coverage
 from bokehfit.metrics import METRICS, MetricOptions, angle_error, compare_outlines
@@ -60,8 +61,9 @@ METRIC_POINTS = 256
 #: it is searched within this many degrees (not at all where the aperture's
 #: outline turns alike: :attr:`bokehfit.apertures.Aperture.turns_alike`).
 ALIGNMENT_SEARCH_DEG = 10.0
-# The thresholds that judge a fit (MIN_SURE_IOU, SMALL_DISC_PX, ...) are bokehfit.judging's, read by the
-# pipeline's judge and by the result's verdict alike; they are importable from here too.
+# The thresholds that judge a fit (MIN_SURE_IOU, ...) are bokehfit.judging's, those of small and faint discs
+# (SMALL_DISC_PX, FAINT_CONTRAST_REL) bokehfit.fit.features', read by the pipeline's judge and by the result's
+# verdict alike; they are importable from here too.
 
 
 def _kernel_outline(kernel: Kernel) -> np.ndarray:

@@ -10,10 +10,9 @@ sentence. Both read the thresholds below, which the docs state.
 
 from __future__ import annotations
 
-import numpy as np
-
 from bokehfit.apertures.features import MIN_RIM
 from bokehfit.fit import REGULAR_OUTLINE_MISFIT, ApertureFit
+from bokehfit.fit.features import FAINT_CONTRAST_REL, SMALL_DISC_PX, small_and_faint
 from bokehfit.words import article
 
 __all__ = [
@@ -32,11 +31,8 @@ MIN_ACCEPTABLE_IOU = 0.6
 #: ... and sure when, besides a clear BIC margin, they match this well with at least MIN_SURE_DISCS discs.
 MIN_SURE_IOU = 0.85
 MIN_SURE_DISCS = 3
-#: ... and the discs are not both small and faint: under SMALL_DISC_PX (median) and standing less than
-#: FAINT_CONTRAST_REL of their background above it (median), an outline of a few hundred pixels is set
-#: by a few code values of the photo's tone curve, grain and compression as much as by the aperture.
-SMALL_DISC_PX = 64.0
-FAINT_CONTRAST_REL = 0.5
+#: ... and the discs are not both small and faint (bokehfit.fit.features.small_and_faint: SMALL_DISC_PX and
+#: FAINT_CONTRAST_REL, the fit's constants, read here).
 # ... and the discs' outlines follow the shape: median radial misfit (in equal-area radii) at most
 # bokehfit.fit.REGULAR_OUTLINE_MISFIT, the fit's "regular" outline (the fit's constant, read here).
 
@@ -83,14 +79,8 @@ def _same_way_round(fit: ApertureFit) -> int:
 
 
 def _small_and_faint(fit: ApertureFit) -> tuple[float, float] | None:
-    """The fitted discs' median diameter and median contrast over their background (a share of it), where
-    both are under SMALL_DISC_PX and FAINT_CONTRAST_REL; else None."""
-    discs = [item.disc for item in fit.disc_fits]
-    if not discs:
-        return None
-    diameter = float(np.median([d.diameter_px for d in discs]))
-    contrast = float(np.median([(d.plateau - d.background) / max(d.background, 1e-6) for d in discs]))
-    return (diameter, contrast) if diameter < SMALL_DISC_PX and contrast < FAINT_CONTRAST_REL else None
+    """:func:`~bokehfit.fit.features.small_and_faint` of the fitted discs."""
+    return small_and_faint([item.disc for item in fit.disc_fits])
 
 
 def profiles_unexplained(fit: ApertureFit) -> int:

@@ -3,8 +3,8 @@
 A threshold in a page of ``docs/`` (or the README) is written as its number followed, with no
 space, by an HTML comment naming the constant it restates; the rendered page shows only the number::
 
-    discs under 64<!-- bokehfit.judging.SMALL_DISC_PX --> px
-    less than 50<!-- bokehfit.judging.FAINT_CONTRAST_REL:% --> % above their background
+    discs under 64<!-- bokehfit.fit.features.SMALL_DISC_PX --> px
+    less than 50<!-- bokehfit.fit.features.FAINT_CONTRAST_REL:% --> % above their background
     at most 2,000<!-- bokehfit.discs.search.MAX_CANDIDATES:, --> candidates
     bodies of 8<!-- bokehfit.view.bodies.MAX_BODY_BYTES:MiB --> MiB at most
 

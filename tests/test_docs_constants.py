@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 
 import bokehfit.discs.search
+import bokehfit.fit.features
 import bokehfit.fit.result
 import bokehfit.judging
 import bokehfit.validate
@@ -88,8 +89,8 @@ def test_check_lists_every_mismatch_with_its_line(tmp_path):
     page = tmp_path / "page.md"
     page.write_text(
         "# A page\n"
-        "sure from 999<!-- bokehfit.judging.MIN_SURE_IOU --> IoU, under 64<!-- bokehfit.judging.SMALL_DISC_PX --> px,\n"
-        "faint below 7<!-- bokehfit.judging.FAINT_CONTRAST_REL:% --> %, at most 2000<!-- bokehfit.discs.search.MAX_CANDIDATES:, -->\n"
+        "sure from 999<!-- bokehfit.judging.MIN_SURE_IOU --> IoU, under 64<!-- bokehfit.fit.features.SMALL_DISC_PX --> px,\n"
+        "faint below 7<!-- bokehfit.fit.features.FAINT_CONTRAST_REL:% --> %, at most 2000<!-- bokehfit.discs.search.MAX_CANDIDATES:, -->\n"
         "gone: 1<!-- bokehfit.judging.NO_SUCH_CONSTANT -->; in code `3<!-- bokehfit.fit.MIN_ELONGATED_DISCS -->`\n"
         "```\n5<!-- bokehfit.fit.FEATURE_DELTA_BIC -->\n```\n"
         "<!-- an ordinary comment -->\n",
@@ -98,10 +99,10 @@ def test_check_lists_every_mismatch_with_its_line(tmp_path):
     assert markers == 5  # those in code are examples, shown as text
     lines = [str(p) for p in problems]
     iou = cc.format_value(bokehfit.judging.MIN_SURE_IOU)
-    faint = cc.format_value(bokehfit.judging.FAINT_CONTRAST_REL, "%")
+    faint = cc.format_value(bokehfit.fit.features.FAINT_CONTRAST_REL, "%")
     candidates = cc.format_value(bokehfit.discs.search.MAX_CANDIDATES, ",")
     assert lines[0] == f"{page}:2: wrote 999, constant bokehfit.judging.MIN_SURE_IOU is {iou}"
-    assert lines[1] == f"{page}:3: wrote 7, constant bokehfit.judging.FAINT_CONTRAST_REL is {faint}"
+    assert lines[1] == f"{page}:3: wrote 7, constant bokehfit.fit.features.FAINT_CONTRAST_REL is {faint}"
     assert lines[2] == f"{page}:3: wrote 2000, constant bokehfit.discs.search.MAX_CANDIDATES is {candidates}"
     assert lines[3].startswith(f"{page}:4: wrote 1, constant bokehfit.judging.NO_SUCH_CONSTANT is unknown (")
     assert len(lines) == 4
@@ -111,13 +112,13 @@ def test_write_rewrites_the_numbers_in_place(tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(sys, "path", list(sys.path))  # main() puts the checkout first
     page = tmp_path / "page.md"
     page.write_text("sure from 999<!-- bokehfit.judging.MIN_SURE_IOU --> IoU; 3 MP of 7<!-- "
-                    "bokehfit.judging.FAINT_CONTRAST_REL:% --> %\n", encoding="utf-8")
+                    "bokehfit.fit.features.FAINT_CONTRAST_REL:% --> %\n", encoding="utf-8")
     assert cc.main(["--check", str(page)]) == 1
     assert "wrote 999" in capsys.readouterr().err
     assert cc.main(["--write", str(page)]) == 0
     iou = cc.format_value(bokehfit.judging.MIN_SURE_IOU)
-    faint = cc.format_value(bokehfit.judging.FAINT_CONTRAST_REL, "%")
+    faint = cc.format_value(bokehfit.fit.features.FAINT_CONTRAST_REL, "%")
     assert page.read_text(encoding="utf-8") == (f"sure from {iou}<!-- bokehfit.judging.MIN_SURE_IOU --> IoU; 3 MP of "
-                                                f"{faint}<!-- bokehfit.judging.FAINT_CONTRAST_REL:% --> %\n")
+                                                f"{faint}<!-- bokehfit.fit.features.FAINT_CONTRAST_REL:% --> %\n")
     assert cc.main(["--check", str(page)]) == 0
     assert [p.name for p in tmp_path.iterdir()] == ["page.md"]  # no temporary left

@@ -123,3 +123,33 @@ def test_flat_discs_ask_for_no_rim_and_the_report_says_why():
     assert all(skipped.values())
     listed = fit.to_json()["features_not_tried"]
     assert {"feature": "rim", "reason": skipped["rim"]} in listed
+
+
+def _stretched(level: float, seed: int = 5) -> np.ndarray:
+    """Four discs drawn by geometry, 40 px wide and 50 px tall (a squeeze of 1.25), ``level`` over a ground of 0.3,
+    their centres 80 px apart in a row; blurred by 1 px, with noise."""
+    width, height = 360, 120
+    yy, xx = np.mgrid[0:height, 0:width].astype(np.float32)
+    image = np.full((height, width), 0.3, np.float32)
+    for i in range(4):
+        r = np.hypot((xx - (60.0 + 80.0 * i)) / 20.0, (yy - 60.0) / 25.0)
+        image += level * np.clip((1.0 - r) * 22.0 + 0.5, 0.0, 1.0)
+    image = cv2.GaussianBlur(image, (0, 0), 1.0)
+    return (image + np.random.default_rng(seed).normal(0.0, 0.003, image.shape)).astype(np.float32)
+
+
+@pytest.mark.parametrize("level, asked", [(0.3, True), (0.1, False)])
+def test_small_faint_discs_ask_for_no_feature_of_their_outlines_shape(level, asked):
+    """Discs stretched alike along the frame's axes ask for a squeeze where their outlines can show it; small (45 px)
+    and faint (a third above their ground) they ask for none, and the report says why: their outlines follow the
+    grain as much as the lens (bokehfit.fit.features.small_and_faint, the judge's small and faint discs)."""
+    image = _stretched(level)
+    discs = find_discs(image).discs
+    assert len(discs) == 4 and all(43 <= d.diameter_px <= 47 for d in discs), [d.diameter_px for d in discs]
+    fit = fit_aperture(image, discs, shapes=["circle"])
+    skipped = dict(fit.features_not_tried)
+    tried = {t.feature for t in fit.feature_trials}
+    if asked:
+        assert "squeeze" in tried, skipped
+    else:
+        assert "squeeze" not in tried and skipped["squeeze"].startswith("the discs are small and faint (median 45 px, "), skipped

@@ -75,7 +75,9 @@ class FeatureSpec:
     ``members`` the fields of a pair's value type (``Vignetting.radius``, ``.shift``), empty for
     a scalar. ``least_visible`` is the least |value| a photo's discs show (a fit keeps no less);
     ``upper_end_only`` names the parameters whose lower end is a value the lens may have, so that
-    only their upper end says the discs pushed them there; ``taken_by_aspect`` says that a
+    only their upper end says the discs pushed them there; ``read_from_outline`` says that discs
+    show the feature by their outlines' shape (a cat-eye's cut, a squeeze's stretch), not by how
+    their light is spread or coloured; ``taken_by_aspect`` says that a
     shape's own aspect (the slit's) takes the feature, so that a fit tries it again on a shape
     without one; ``applies`` says which shapes take it; ``starts_at`` builds a fit's start
     (None: switched on at its neutral value, :meth:`Aperture.with_features`).
@@ -88,6 +90,7 @@ class FeatureSpec:
     reported: str = "set"
     least_visible: float | None = None
     upper_end_only: tuple[str, ...] = ()
+    read_from_outline: bool = False
     taken_by_aspect: bool = False
     applies: Callable[[ShapeSpec], bool] = _every_shape
     starts_at: Callable[[Aperture, FeatureEvidence], Aperture] | None = None
@@ -160,11 +163,12 @@ FEATURE_SPECS: dict[str, FeatureSpec] = {
         # Straight blades are a value the fit tells apart: every n-gon reports its roundness.
         FeatureSpec("roundness", 0.0, ("roundness",), reported="shape", applies=_blades),
         # A slit's own aspect takes an anamorphic squeeze: the circle tries it again.
-        FeatureSpec("squeeze", 1.0, ("squeeze",), reported="tested", taken_by_aspect=True, starts_at=_start_squeeze),
+        FeatureSpec("squeeze", 1.0, ("squeeze",), reported="tested", read_from_outline=True, taken_by_aspect=True,
+                    starts_at=_start_squeeze),
         FeatureSpec("rim", 0.0, ("rim",), reported="tested", least_visible=MIN_RIM, starts_at=_start_rim),
         # A barrel at its smallest radius hugs the aperture (a real cut); at its largest it cuts nothing.
         FeatureSpec("vignetting", None, ("vignetting_radius", "vignetting_shift"), members=("radius", "shift"),
-                    upper_end_only=("vignetting_radius",), starts_at=_start_vignetting),
+                    upper_end_only=("vignetting_radius",), read_from_outline=True, starts_at=_start_vignetting),
         FeatureSpec("chromatic", None, ("chromatic", "chromatic"), members=("red", "blue")),
     )
 }

@@ -30,7 +30,7 @@ from bokehfit.fit.signature import Screen
 from bokehfit.words import counted
 
 __all__ = ["add_feature", "at_bound", "feature_asks", "feature_evidence", "FeatureTrial", "gain_without_one_disc",
-           "FEATURE_DELTA_BIC", "MIN_RIM",
+           "small_and_faint", "FAINT_CONTRAST_REL", "FEATURE_DELTA_BIC", "MIN_RIM", "SMALL_DISC_PX",
            "VIGNETTING_MIN_FIELD"]
 
 #: A §3b feature joins the model when it lowers the joint BIC by at least this (Kass & Raftery: "very strong"),
@@ -51,6 +51,22 @@ RIM_SIGNAL = 0.04
 SQUEEZE_AXIS_DEG = 10.0
 SQUEEZE_SIGNAL = 1.03
 SQUEEZE_AGREEMENT = 0.06
+#: Discs under SMALL_DISC_PX (median) that stand less than FAINT_CONTRAST_REL of their background above it
+#: (median) are small and faint: an outline of a few hundred pixels is set by a few code values of the photo's
+#: tone curve, grain and compression as much as by the aperture. Their outlines fix neither a sure shape
+#: (``bokehfit.judging``) nor a feature read from the outlines' shape (:func:`feature_asks`).
+SMALL_DISC_PX = 64.0
+FAINT_CONTRAST_REL = 0.5
+
+
+def small_and_faint(discs: Sequence[Disc]) -> tuple[float, float] | None:
+    """The discs' median diameter and median contrast over their background (a share of it), where both are
+    under SMALL_DISC_PX and FAINT_CONTRAST_REL; else None (and for no discs)."""
+    if not discs:
+        return None
+    diameter = float(np.median([d.diameter_px for d in discs]))
+    contrast = float(np.median([(d.plateau - d.background) / max(d.background, 1e-6) for d in discs]))
+    return (diameter, contrast) if diameter < SMALL_DISC_PX and contrast < FAINT_CONTRAST_REL else None
 
 
 def at_bound(aperture: Aperture, feature: str) -> bool:
@@ -246,7 +262,9 @@ def feature_asks(fits: list[PixelFit], discs: list[Disc], screens: list[Screen],
     or darker than their centres (RIM_SIGNAL of the contrast, median over the discs that show a profile); the
     vignetting where at least 3 discs were fitted, some lie far enough from the centre to be cut (VIGNETTING_MIN_FIELD),
     and those misfit the shape more than the central ones do (or none is central); the squeeze where the discs are
-    stretched alike along the frame's axes (:func:`_shared_squeeze`)."""
+    stretched alike along the frame's axes (:func:`_shared_squeeze`). A feature the discs show by their outlines'
+    shape (its record's ``read_from_outline``: the vignetting, the squeeze) is not asked for by small and faint
+    discs (:func:`small_and_faint`)."""
     asks = {}
     signals = [v for v in (_rim_signal(c, f) for c, f in zip(crops, fits)) if v is not None]
     ringed = [d.index for d in discs if d.profiled]
@@ -276,4 +294,12 @@ def feature_asks(fits: list[PixelFit], discs: list[Disc], screens: list[Screen],
         asks["vignetting"] = True, "the outer discs misfit the shape more than the central ones"
     squeeze, why = _shared_squeeze(discs)
     asks["squeeze"] = squeeze is not None, why
+    faint = small_and_faint(discs)
+    if faint:
+        for name, (asked, _) in asks.items():
+            if asked and FEATURE_SPECS[name].read_from_outline:
+                asks[name] = False, (f"the discs are small and faint (median {faint[0]:.0f} px, {faint[1]:.0%} above "
+                                     f"their background; {SMALL_DISC_PX:.0f} px or {FAINT_CONTRAST_REL:.0%} to read it "
+                                     "from their outlines): their outlines follow the photo's grain and compression "
+                                     "as much as the lens")
     return asks
