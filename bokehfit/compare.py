@@ -24,10 +24,10 @@ from bokehfit.discs import COMPARE_MIN_DIAMETER_PX, DiscSearch, find_discs, meas
 from bokehfit.discs.labels import DiscLabels, read_labels
 from bokehfit.errors import InputError
 from bokehfit.fit import ApertureFit, FitOptions, fit_aperture
+from bokehfit.fit.features import FAINT_CONTRAST_REL, SMALL_DISC_PX
 from bokehfit.gpu import AdapterChoice
 from bokehfit.io import Photo, load_photo
 from bokehfit.io.colour import luminance_weights
-from bokehfit.fit.features import FAINT_CONTRAST_REL, SMALL_DISC_PX
 from bokehfit.judging import MIN_ACCEPTABLE_IOU, MIN_SURE_DISCS, MIN_SURE_IOU, judge
 from bokehfit.kernels import AUTO, Kernel, compute_kernel
 from bokehfit.kernels.exact import coverage

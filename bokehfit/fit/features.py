@@ -296,7 +296,7 @@ def feature_asks(fits: list[PixelFit], discs: list[Disc], screens: list[Screen],
     asks["squeeze"] = squeeze is not None, why
     faint = small_and_faint(discs)
     if faint:
-        for name, (asked, _) in asks.items():
+        for name, (asked, _) in list(asks.items()):
             if asked and FEATURE_SPECS[name].read_from_outline:
                 asks[name] = False, (f"the discs are small and faint (median {faint[0]:.0f} px, {faint[1]:.0%} above "
                                      f"their background; {SMALL_DISC_PX:.0f} px or {FAINT_CONTRAST_REL:.0%} to read it "
