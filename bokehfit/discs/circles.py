@@ -137,7 +137,7 @@ def _normalised(copy: np.ndarray, scale_px: float) -> np.ndarray:
     """The copy's logarithm less its local mean, over its local spread, as 8-bit codes about 128."""
     logged = np.log(copy.astype(np.float32) + LOG_FLOOR)
     residual = logged - _smoothed(logged, scale_px)
-    spread = np.maximum(np.sqrt(np.maximum(_smoothed(residual * residual, scale_px), 0.0)), MIN_SPREAD)
+    spread = np.maximum(np.sqrt(_smoothed(residual * residual, scale_px)), MIN_SPREAD)
     return np.clip(residual / spread * SPREAD_CODES + 128.0, 0, 255).astype(np.uint8)
 
 
