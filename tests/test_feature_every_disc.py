@@ -153,3 +153,57 @@ def test_small_faint_discs_ask_for_no_feature_of_their_outlines_shape(level, ask
         assert "squeeze" in tried, skipped
     else:
         assert "squeeze" not in tried and skipped["squeeze"].startswith("the discs are small and faint (median 45 px, "), skipped
+
+
+def test_a_feature_not_kept_is_tried_again_once_another_joins(monkeypatch):
+    """Reference photo 09's rim gained a ΔBIC of 6 on the plain circle and 151 once the cat-eye that cuts its
+    discs was in the model: a feature not kept is tried once more after another joins, and says so."""
+    from bokehfit.fit import stages
+
+    def gain(feature, before):  # the BIC each feature gains over ``before``'s model (its features)
+        return {"rim": 151.0 if "vignetting" in before else 6.0, "vignetting": 883.0}[feature]
+
+    def trial_of(feature, before, after, noise, discs, asked="", again=None, again_with=()):
+        return FeatureTrial(feature, gain(feature, before.aperture), 100.0, True, False, 0.4, None, asked,
+                            tuple(again_with), None if again is None else again.gain)
+
+    monkeypatch.setattr(stages, "feature_asks", lambda *a: {"rim": (True, "a ring"), "vignetting": (True, "cut"),
+                                                           "squeeze": (False, "round")})
+    monkeypatch.setattr(stages, "add_feature", lambda aperture, feature, fits, discs: aperture | {feature})
+    monkeypatch.setattr(stages, "fit_discs", lambda crops, winner, start, **_: SimpleNamespace(aperture=start, fits=[]))
+    monkeypatch.setattr(stages.FeatureTrial, "of", staticmethod(trial_of))
+    joint = stages.Joint([], [], [], [], SimpleNamespace(aperture=frozenset(), fits=[]))
+    tried = stages.try_features(joint, SimpleNamespace(fits=[], screens=[]), winner=None)
+    assert [t.feature for t in tried.trials] == ["vignetting", "rim"] and all(t.kept for t in tried.trials)
+    assert tried.fit.aperture == {"rim", "vignetting"} and tried.not_tried == (("squeeze", "round"),)
+    rim = tried.trials[1]
+    assert rim.again_with == ("vignetting",) and rim.first_gain == 6.0, rim
+    assert rim.reason == "tried again with vignetting in the model (ΔBIC 6 before), kept: ΔBIC 151, at least 100 " \
+                         "with any one disc left out", rim.reason
+    assert rim.to_json()["tried_again_with"] == ["vignetting"] and rim.to_json()["first_delta_bic"] == 6.0
+
+
+def test_a_feature_is_tried_again_only_once(monkeypatch):
+    """A feature that fails again is not retried when more join after its first trial: each is fitted at most twice."""
+    from bokehfit.fit import stages
+
+    fitted = []
+
+    def trial_of(feature, before, after, noise, discs, asked="", again=None, again_with=()):
+        return FeatureTrial(feature, 4.0 if feature == "rim" else 50.0, 40.0, True, False, 0.4, None, asked,
+                            tuple(again_with), None if again is None else again.gain)
+
+    def fit_discs(crops, winner, start, **_):
+        fitted.append(start)
+        return SimpleNamespace(aperture=start, fits=[])
+
+    monkeypatch.setattr(stages, "feature_asks", lambda *a: {"rim": (True, ""), "vignetting": (True, ""),
+                                                           "squeeze": (True, "")})
+    monkeypatch.setattr(stages, "add_feature", lambda aperture, feature, fits, discs: aperture | {feature})
+    monkeypatch.setattr(stages, "fit_discs", fit_discs)
+    monkeypatch.setattr(stages.FeatureTrial, "of", staticmethod(trial_of))
+    joint = stages.Joint([], [], [], [], SimpleNamespace(aperture=frozenset(), fits=[]))
+    tried = stages.try_features(joint, SimpleNamespace(fits=[], screens=[]), winner=None)
+    assert sum("rim" in start for start in fitted) == 2, fitted
+    assert [(t.feature, t.kept) for t in tried.trials] == [("vignetting", True), ("squeeze", True), ("rim", False)]
+    assert tried.trials[-1].again_with == ("vignetting", "squeeze")  # both in the model when it was tried again

@@ -135,16 +135,22 @@ class FeatureTrial:
     value: object  #: its fitted value in the trial (a number, or a mapping of the pair's members)
     carried_by: int | None = None  #: the index of the disc whose leaving out leaves the least gain (None: one disc)
     asked: str = ""  #: why the discs asked for it (:func:`feature_asks`)
+    #: A second trial: the features that joined the model since its first, which it was tried again with ...
+    again_with: tuple[str, ...] = ()
+    first_gain: float | None = None  #: ... and what it gained the first time
 
     @classmethod
     def of(cls, feature: str, before: JointFit, after: JointFit, noise: Sequence[float],
-           discs: Sequence[Disc], asked: str = "") -> FeatureTrial:
-        """The trial of ``feature``: ``after``, the joint fit of ``discs`` with it on, against ``before``, without."""
+           discs: Sequence[Disc], asked: str = "", again: FeatureTrial | None = None,
+           again_with: Sequence[str] = ()) -> FeatureTrial:
+        """The trial of ``feature``: ``after``, the joint fit of ``discs`` with it on, against ``before``, without;
+        ``again``, its first trial where this one is a second with the features ``again_with`` in the model."""
         spec = FEATURE_SPECS[feature]
         gains = gains_without_each_disc(before, after, noise)
         least, carried_by = (float(gains.min()), discs[int(np.argmin(gains))].index) if len(gains) else (-math.inf, None)
         return cls(feature, before.bic - after.bic, least, spec.shows(after.aperture), at_bound(after.aperture, feature),
-                   spec.value(after.aperture), carried_by, asked)
+                   spec.value(after.aperture), carried_by, asked, tuple(again_with),
+                   None if again is None else again.gain)
 
     @property
     def kept(self) -> bool:
@@ -154,7 +160,14 @@ class FeatureTrial:
 
     @property
     def reason(self) -> str:
-        """Why it joined the model or did not, in words (the first test it fails, in the order of :attr:`kept`)."""
+        """Why it joined the model or did not, in words (the first test it fails, in the order of :attr:`kept`),
+        after the first trial's gain where this is a second."""
+        if self.again_with:
+            return (f"tried again with {' and '.join(self.again_with)} in the model (ΔBIC {self.first_gain:.0f} "
+                    f"before), {self._outcome()}")
+        return self._outcome()
+
+    def _outcome(self) -> str:
         gain = f"ΔBIC {self.gain:.0f}"
         if self.gain < FEATURE_DELTA_BIC:
             return f"not kept: {gain} ({FEATURE_DELTA_BIC:.0f} needed)"
@@ -174,7 +187,9 @@ class FeatureTrial:
                  else round(float(self.value), 3))
         one_out = None if self.carried_by is None else {"least": round(self.least_gain, 2), "disc": self.carried_by}
         return {"feature": self.feature, "kept": self.kept, "delta_bic": round(self.gain, 2),
-                "delta_bic_one_disc_out": one_out, "value": value, "reason": self.reason, "asked_because": self.asked}
+                "delta_bic_one_disc_out": one_out, "value": value, "reason": self.reason, "asked_because": self.asked,
+                "tried_again_with": list(self.again_with),
+                "first_delta_bic": None if self.first_gain is None else round(self.first_gain, 2)}
 
 
 def _value_text(value) -> str:

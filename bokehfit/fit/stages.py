@@ -340,19 +340,27 @@ def fit_joint(chosen: Chosen, screened: Screened, consensus: Consensus, winner: 
 def try_features(joint: Joint, consensus: Consensus, winner: Family) -> Joint:
     """Stage 8: the §3b features the discs ask for, each tried on the joint fit and kept where it
     gains FEATURE_DELTA_BIC, with any one disc left out too (every disc's, not one disc's quirk), shows
-    (its record's least visible value: a rim of at least MIN_RIM) and is not at its bound; those not asked
-    for are kept with the reason."""
+    (its record's least visible value: a rim of at least MIN_RIM) and is not at its bound; one not kept is tried
+    once more after another joins, with it in the model; those not asked for are kept with the reason."""
     ids = joint.ids
     asks = feature_asks([consensus.fits[i] for i in ids], joint.discs, [consensus.screens[i] for i in ids],
                         joint.joint_crops)
-    trials = []
+    trials: list[FeatureTrial] = []
     best = joint
-    for feature in (feature for feature, (asked, _) in asks.items() if asked):
+    queue = [(feature, None) for feature, (asked, _) in asks.items() if asked]
+    while queue:
+        feature, first = queue.pop(0)
         start = add_feature(best.fit.aperture, feature, best.fit.fits, joint.discs)
         fit = fit_discs(joint.joint_crops, winner, start, noise=joint.noise, disc_starts=best.disc_starts())
-        trials.append(FeatureTrial.of(feature, best.fit, fit, joint.noise, joint.discs, asks[feature][1]))
-        if trials[-1].kept:
+        since = [] if first is None else [t.feature for t in trials[trials.index(first) + 1:] if t.kept]
+        trial = FeatureTrial.of(feature, best.fit, fit, joint.noise, joint.discs, asks[feature][1], first, since)
+        trials = [t for t in trials if t is not first] + [trial]
+        if trial.kept:
             best = dataclasses.replace(best, fit=fit)
+            # A feature not kept before this one joined may have been masked by what this one explains (a cat-eye's
+            # cut misfit as a rim's light): each is tried once more, with it in the model.
+            queue += [(t.feature, t) for t in trials if not t.kept and t.first_gain is None
+                      and all(t is not q for _, q in queue)]
     not_tried = tuple((feature, why) for feature, (asked, why) in asks.items() if not asked)
     return dataclasses.replace(best, trials=tuple(trials), not_tried=not_tried)
 
