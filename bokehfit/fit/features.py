@@ -153,6 +153,11 @@ class FeatureTrial:
                    None if again is None else again.gain)
 
     @property
+    def is_second(self) -> bool:
+        """Whether this is a feature's second trial (:func:`bokehfit.fit.stages.try_features`)."""
+        return self.first_gain is not None
+
+    @property
     def kept(self) -> bool:
         """It joins the model: FEATURE_DELTA_BIC gained, with any one disc left out too, shown, not at its bound."""
         return (self.gain >= FEATURE_DELTA_BIC and self.shows and not self.at_bound
@@ -162,7 +167,7 @@ class FeatureTrial:
     def reason(self) -> str:
         """Why it joined the model or did not, in words (the first test it fails, in the order of :attr:`kept`),
         after the first trial's gain where this is a second."""
-        if self.again_with:
+        if self.is_second:
             return (f"tried again with {' and '.join(self.again_with)} in the model (ΔBIC {self.first_gain:.0f} "
                     f"before), {self._outcome()}")
         return self._outcome()

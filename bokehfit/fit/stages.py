@@ -352,15 +352,16 @@ def try_features(joint: Joint, consensus: Consensus, winner: Family) -> Joint:
         feature, first = queue.pop(0)
         start = add_feature(best.fit.aperture, feature, best.fit.fits, joint.discs)
         fit = fit_discs(joint.joint_crops, winner, start, noise=joint.noise, disc_starts=best.disc_starts())
+        # A second trial is tried with the features kept since its first: those after it in the trials' order.
         since = [] if first is None else [t.feature for t in trials[trials.index(first) + 1:] if t.kept]
         trial = FeatureTrial.of(feature, best.fit, fit, joint.noise, joint.discs, asks[feature][1], first, since)
-        trials = [t for t in trials if t is not first] + [trial]
+        trials = [t for t in trials if t.feature != feature] + [trial]
         if trial.kept:
             best = dataclasses.replace(best, fit=fit)
             # A feature not kept before this one joined may have been masked by what this one explains (a cat-eye's
             # cut misfit as a rim's light): each is tried once more, with it in the model.
-            queue += [(t.feature, t) for t in trials if not t.kept and t.first_gain is None
-                      and all(t is not q for _, q in queue)]
+            queued = {name for name, _ in queue}
+            queue += [(t.feature, t) for t in trials if not (t.kept or t.is_second or t.feature in queued)]
     not_tried = tuple((feature, why) for feature, (asked, why) in asks.items() if not asked)
     return dataclasses.replace(best, trials=tuple(trials), not_tried=not_tried)
 
